@@ -1,0 +1,37 @@
+"""Step 7: the mass ``m`` (Sec. V-C).
+
+While every robot applies the same force ``f_m``, eq. (1) reads (eq. 25)
+
+    p̈_C = (n / m) f_m,
+
+a linear system whose output ``ṗ_C`` each robot knows from eq. (7). ``θ = 1/m`` follows from
+the Appendix's filtered regression with ``y = ṗ_C`` and ``u = n f_m``.
+"""
+
+from __future__ import annotations
+
+from agent.estimation.filtered_regression import FilteredRegression
+from agent.estimation.geometry import Vec2
+
+
+class MassEstimator:
+    """``m`` from ``ṗ_C`` samples while the ``n`` robots each push with ``f_m``."""
+
+    def __init__(self, filter_gain: float, n: int, force: Vec2, forgetting: float = 1.0):
+        self.total_force = (n * force[0], n * force[1])
+        self.regression = FilteredRegression(
+            filter_gain, outputs=2, params=1, forgetting=forgetting
+        )
+
+    def update(self, com_velocity: Vec2, dt: float) -> None:
+        """Feed ``ṗ_C`` at the end of an interval ``dt`` (the first call starts the filters)."""
+        if not self.regression.started:
+            self.regression.start(com_velocity)
+        else:
+            fx, fy = self.total_force
+            self.regression.update(com_velocity, ((fx * dt,), (fy * dt,)), dt)
+
+    @property
+    def mass(self) -> float | None:
+        est = self.regression.estimate
+        return None if est is None or est[0] <= 0.0 else 1.0 / est[0]

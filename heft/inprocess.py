@@ -1,0 +1,131 @@
+"""The in-process run: one plant, ``n`` agents and the in-memory transport, stepped in lockstep
+as fast as the machine allows.
+
+Each tick ``k``: the plant is sampled, every agent steps on its own measurement and on the
+messages delivered to it so far (it uses those stamped before ``k``), the agents' force commands
+go to the plant, their messages go through the transport, and the plant advances one sensor
+period. The run ends once every agent has reached the ``done`` phase, or at the scenario's
+``max_time_s``. Ground truth is recorded beside the agents' estimates, for evaluation only.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from agent.agent import DONE, PHASES, Agent
+from agent.config import AgentConfig
+from agent.protocol import Estimates
+from agent.transport import InMemoryTransport, Transport
+from simulator.plant import Plant, Truth
+from simulator.scenario import Scenario
+
+Progress = Callable[[int, float, list[Agent]], None]
+
+
+@dataclass
+class Sample:
+    """One recorded instant: the truth then and every robot's estimates of that instant."""
+
+    time_s: float
+    truth: Truth
+    estimates: dict[int, Estimates]
+
+
+@dataclass
+class RunOutcome:
+    """What a run produced: final estimates, truth at the same instant, and the history."""
+
+    scenario: Scenario
+    converged: bool
+    ticks: int
+    wall_s: float
+    final: Sample
+    history: list[Sample] = field(default_factory=list)
+    phase_ticks: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def sim_time_s(self) -> float:
+        return self.ticks * self.scenario.period_s
+
+
+def make_agents(scenario: Scenario) -> list[Agent]:
+    """One agent per robot, each told only its id, ``n``, its neighbours and the tuning."""
+    return [
+        Agent(
+            AgentConfig(
+                robot=i,
+                n=scenario.n,
+                neighbours=scenario.neighbours(i),
+                period_s=scenario.period_s,
+                seed=scenario.run.seed,
+                tuning=scenario.agent,
+            )
+        )
+        for i in range(1, scenario.n + 1)
+    ]
+
+
+def run_inprocess(
+    scenario: Scenario,
+    *,
+    transport: Transport | None = None,
+    record_every: int = 5,
+    progress: Progress | None = None,
+    progress_every: int = 100,
+) -> RunOutcome:
+    """Run ``scenario`` to convergence (or its time limit) in this process."""
+    plant = Plant(scenario)
+    agents = make_agents(scenario)
+    transport = transport or InMemoryTransport(scenario.n, scenario.edges)
+    max_ticks = round(scenario.run.max_time_s / scenario.period_s)
+    history: list[Sample] = []
+    phase_ticks: dict[str, int] = {}
+    started = time.perf_counter()
+    converged = False
+    pending: Truth | None = None  # truth at the instant the next step's estimates refer to
+    final: Sample | None = None
+    last = max_ticks + 1  # the tick after which the run stops
+    k = 0
+    while k <= last:
+        measurements = plant.measure()
+        shares = []
+        for agent, measurement in zip(agents, measurements):
+            command, share = agent.step(measurement, transport.receive(agent.robot))
+            plant.command(agent.robot, command.force)
+            shares.append(share)
+        for share in shares:
+            transport.send(share)
+        if pending is not None:  # the agents' estimates now refer to tick k - 1
+            final = _sample(k - 1, scenario, pending, agents)
+            history.append(final)
+        team_phase = min(a.phase for a in agents)
+        phase_ticks.setdefault(PHASES[team_phase], k)
+        if progress is not None and k % progress_every == 0:
+            progress(k, k * scenario.period_s, agents)
+        if team_phase == DONE and not converged:
+            converged = True
+            last = k + 1  # one more tick, for estimates of this instant
+        # The plant has not moved since it was sampled: its truth is that of tick k.
+        pending = plant.truth() if (k % record_every == 0 or k >= last - 1) else None
+        plant.advance()
+        k += 1
+    assert final is not None
+    return RunOutcome(
+        scenario=scenario,
+        converged=converged,
+        ticks=final.truth.tick,
+        wall_s=time.perf_counter() - started,
+        final=final,
+        history=history,
+        phase_ticks=phase_ticks,
+    )
+
+
+def _sample(instant: int, scenario: Scenario, truth: Truth, agents: list[Agent]) -> Sample:
+    return Sample(
+        time_s=instant * scenario.period_s,
+        truth=truth,
+        estimates={a.robot: a.estimates() for a in agents},
+    )

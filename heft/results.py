@@ -1,0 +1,301 @@
+"""A run's results: the JSON document, the worst errors against truth, and a text table.
+
+Everything here is computed from the final :class:`~heft.inprocess.Sample` of a run (every
+robot's :class:`~agent.protocol.Estimates` and the plant's truth of the same instant) and from
+the scenario (robot ids and graph). Units are SI; vectors are ``[x, y]`` in the world frame
+``W`` at the final estimation instant.
+
+Conventions (those of :mod:`agent.protocol`):
+
+- ``contact_to_com`` of robot ``i`` is ``p_C − p_Ci``;
+- ``relative_positions[j]`` of robot ``i`` is ``z_ij = p_Ci − p_Cj`` (``j`` a graph neighbour);
+- ``centroid_offset`` is ``z_i = p_Ci − p_G`` (``p_G`` the centroid of the contacts);
+- ``com_offset`` is ``z_C = p_G − p_C``; ``com_observer`` is observer (24)'s ``ẑ_C``.
+
+Paper steps (``phases`` of the JSON), from each robot's :class:`~agent.protocol.Estimates`
+(``started[step]`` and ``settled[step]``, ticks):
+
+- ``start_s`` = when the first robot began the step, ``min_i started_i[step] × period``;
+- ``end_s`` = when the last robot's estimate settled, ``max_i settled_i[step] × period``;
+- either is ``None`` if some robot never reached it. Steps 1–3 run side by side, and so do 5–7.
+
+The times at which the *team* switched force regime (``excite``, ``inertia``, ``push``,
+``done``) are given beside them, under ``team_phases``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from agent.protocol import Estimates
+    from heft.inprocess import RunOutcome
+    from simulator.plant import Truth
+
+Vec2 = tuple[float, float]
+STEPS = tuple(range(1, 8))
+"""The paper's seven steps."""
+STEP_NAMES = {
+    1: "relative positions z_ij",
+    2: "centroid offsets z_i",
+    3: "angular velocity omega",
+    4: "moment of inertia J",
+    5: "COM offset z_C",
+    6: "COM velocity",
+    7: "mass m",
+}
+ERROR_KEYS = (
+    "mass_rel",
+    "moment_rel",
+    "contact_to_com_m",
+    "relative_positions_m",
+    "centroid_offset_m",
+    "com_offset_m",
+    "com_observer_m",
+    "omega_rad_s",
+)
+"""The keys of :func:`errors`; the first five are those the project's accuracy aims bound."""
+
+
+# ------------------------------------------------------------------------------ small helpers
+def _number(value: float | None) -> float | None:
+    """``value`` as a float, or None when it is missing or not finite (JSON has no NaN)."""
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _vec(value: Sequence[float] | None) -> list[float] | None:
+    """``value`` as a JSON pair ``[x, y]``, or None when missing or not finite."""
+    if value is None:
+        return None
+    x, y = _number(value[0]), _number(value[1])
+    return None if x is None or y is None else [x, y]
+
+
+def _diff(a: Vec2, b: Vec2) -> Vec2:
+    return (a[0] - b[0], a[1] - b[1])
+
+
+def _worst(values: Iterable[float | None]) -> float | None:
+    """The largest of ``values``; None if any is None (the worst is then unknown) or none."""
+    items = list(values)
+    if not items or any(v is None for v in items):
+        return None
+    return _number(max(items))  # type: ignore[type-var]
+
+
+def _rel(estimate: float | None, truth: float) -> float | None:
+    return None if estimate is None else abs(estimate - truth) / abs(truth)
+
+
+def _dist(estimate: Sequence[float] | None, truth: Sequence[float]) -> float | None:
+    return None if estimate is None else math.dist(estimate, truth)
+
+
+# ------------------------------------------------------------------------------ truth
+def true_relative(truth: Truth, i: int, j: int) -> Vec2:
+    """``z_ij = p_Ci − p_Cj`` from the plant's truth (robots are 1-based)."""
+    return _diff(truth.contacts[i - 1], truth.contacts[j - 1])
+
+
+def _neighbours(outcome: RunOutcome) -> dict[int, tuple[int, ...]]:
+    scenario = outcome.scenario
+    return {i: scenario.neighbours(i) for i in range(1, scenario.n + 1)}
+
+
+def _truth_dict(outcome: RunOutcome) -> dict[str, Any]:
+    truth = outcome.final.truth
+    robots = {}
+    for i, neighbours in _neighbours(outcome).items():
+        robots[str(i)] = {
+            "contact_to_com": _vec(truth.contact_to_com[i - 1]),
+            "relative_positions": {str(j): _vec(true_relative(truth, i, j)) for j in neighbours},
+            "centroid_offset": _vec(truth.centroid_offsets[i - 1]),
+        }
+    return {
+        "mass": _number(truth.mass),
+        "moment": _number(truth.moment),
+        "omega": _number(truth.omega),
+        "com_offset": _vec(truth.com_offset),
+        "robots": robots,
+    }
+
+
+# ------------------------------------------------------------------------------ estimates
+def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
+    """One robot's estimates as JSON (all None when the robot reported nothing)."""
+    if est is None:
+        return {
+            **dict.fromkeys(("mass", "moment", "contact_to_com")),
+            "relative_positions": {},
+            **dict.fromkeys(("centroid_offset", "com_offset", "com_observer", "omega", "phase")),
+            "settled_s": {},
+        }
+    return {
+        "mass": _number(est.mass),
+        "moment": _number(est.moment),
+        "contact_to_com": _vec(est.contact_to_com),
+        "relative_positions": {str(j): _vec(z) for j, z in sorted(est.relative_positions.items())},
+        "centroid_offset": _vec(est.centroid_offset),
+        "com_offset": _vec(est.com_offset),
+        "com_observer": _vec(est.com_observer),
+        "omega": _number(est.omega),
+        "phase": est.phase,
+        "settled_s": {str(step): tick * period for step, tick in sorted(est.settled.items())},
+    }
+
+
+# ------------------------------------------------------------------------------ errors
+def robot_errors(outcome: RunOutcome, robot: int) -> dict[str, float | None]:
+    """Robot ``robot``'s errors against truth at the final instant (None: no estimate).
+
+    ``relative_positions_m`` is its worst ``‖ẑ_ij − z_ij‖`` over its graph neighbours ``j``.
+    """
+    truth = outcome.final.truth
+    est = outcome.final.estimates.get(robot)
+    if est is None:
+        return dict.fromkeys(ERROR_KEYS)
+    i = robot
+    return {
+        "mass_rel": _rel(est.mass, truth.mass),
+        "moment_rel": _rel(est.moment, truth.moment),
+        "contact_to_com_m": _dist(est.contact_to_com, truth.contact_to_com[i - 1]),
+        "relative_positions_m": _worst(
+            _dist(est.relative_positions.get(j), true_relative(truth, i, j))
+            for j in outcome.scenario.neighbours(i)
+        ),
+        "centroid_offset_m": _dist(est.centroid_offset, truth.centroid_offsets[i - 1]),
+        "com_offset_m": _dist(est.com_offset, truth.com_offset),
+        "com_observer_m": _dist(est.com_observer, truth.com_offset),
+        "omega_rad_s": None if est.omega is None else abs(est.omega - truth.omega),
+    }
+
+
+def errors(outcome: RunOutcome) -> dict[str, float | None]:
+    """The worst error over robots of each estimate at the final instant.
+
+    Keys are :data:`ERROR_KEYS`: ``mass_rel`` and ``moment_rel`` are relative
+    (``|m̂ − m| / m``), the ``_m`` keys are Euclidean distances in metres and ``omega_rad_s``
+    is ``|ω̂ − ω|``. A value is None when some robot has no such estimate.
+    """
+    per_robot = [robot_errors(outcome, i) for i in range(1, outcome.scenario.n + 1)]
+    return {key: _worst(e[key] for e in per_robot) for key in ERROR_KEYS}
+
+
+# ------------------------------------------------------------------------------ phases
+def step_times(outcome: RunOutcome) -> list[dict[str, Any]]:
+    """``[{"step", "start_s", "end_s"}, ...]`` for steps 1..7 (see the module docstring)."""
+    period = outcome.scenario.period_s
+    estimates = [outcome.final.estimates.get(i) for i in range(1, outcome.scenario.n + 1)]
+    rows: list[dict[str, Any]] = []
+    for step in STEPS:
+        starts = [None if e is None else e.started.get(step) for e in estimates]
+        ends = [None if e is None else e.settled.get(step) for e in estimates]
+        start = None if None in starts else min(starts) * period  # type: ignore[type-var]
+        end = None if None in ends else max(ends) * period  # type: ignore[type-var]
+        rows.append({"step": step, "start_s": start, "end_s": end, "name": STEP_NAMES[step]})
+    return rows
+
+
+def team_phases(outcome: RunOutcome) -> dict[str, float]:
+    """When the team entered each force regime (s), from the run's phase switches."""
+    period = outcome.scenario.period_s
+    return {name: tick * period for name, tick in outcome.phase_ticks.items()}
+
+
+# ------------------------------------------------------------------------------ the document
+def results_dict(outcome: RunOutcome) -> dict[str, Any]:
+    """The results JSON of a run (see the module docstring and the README)."""
+    period = outcome.scenario.period_s
+    robots = {
+        str(i): _robot_dict(outcome.final.estimates.get(i), period)
+        for i in range(1, outcome.scenario.n + 1)
+    }
+    return {
+        "scenario": outcome.scenario.name,
+        "converged": bool(outcome.converged),
+        "sim_time_s": float(outcome.sim_time_s),
+        "wall_time_s": float(outcome.wall_s),
+        "n": outcome.scenario.n,
+        "edges": [list(e) for e in outcome.scenario.edges],
+        "phases": step_times(outcome),
+        "team_phases": team_phases(outcome),
+        "robots": robots,
+        "truth": _truth_dict(outcome),
+        "errors": errors(outcome),
+    }
+
+
+# ------------------------------------------------------------------------------ the table
+def _fmt(value: float | None, spec: str, width: int) -> str:
+    return ("-" if value is None else format(value, spec)).rjust(width)
+
+
+def _scaled(value: float | None, factor: float) -> float | None:
+    return None if value is None else value * factor
+
+
+_HEADER = (
+    f"{'robot':>5} {'m [kg]':>9} {'J [kg m2]':>10} {'ctc x [m]':>10} {'ctc y [m]':>10}"
+    f" {'m err %':>8} {'J err %':>8} {'ctc err mm':>10} {'z_ij err mm':>11}"
+)
+
+
+def _table_row(
+    label: str,
+    mass: float | None,
+    moment: float | None,
+    ctc: Sequence[float] | None,
+    errs: dict[str, float | None],
+) -> str:
+    """One line of the table; ``-`` where a value is missing."""
+    x, y = (None, None) if ctc is None else ctc
+    return (
+        f"{label:>5} {_fmt(mass, '.5f', 9)} {_fmt(moment, '.5f', 10)}"
+        f" {_fmt(x, '.4f', 10)} {_fmt(y, '.4f', 10)}"
+        f" {_fmt(_scaled(errs.get('mass_rel'), 100), '.4f', 8)}"
+        f" {_fmt(_scaled(errs.get('moment_rel'), 100), '.4f', 8)}"
+        f" {_fmt(_scaled(errs.get('contact_to_com_m'), 1000), '.3f', 10)}"
+        f" {_fmt(_scaled(errs.get('relative_positions_m'), 1000), '.3f', 11)}"
+    )
+
+
+def _time(value: float | None) -> str:
+    """A time as ``'   3.40 s'``, or ``-`` in the same width."""
+    return f"{'-':>7}  " if value is None else f"{value:7.2f} s"
+
+
+def format_table(outcome: RunOutcome) -> str:
+    """A fixed-width table (under 100 columns): each robot's m̂, Ĵ and ``contact_to_com``
+    with their errors, the truth, the worst errors, and each paper step's start and end."""
+    truth = outcome.final.truth
+    status = "converged" if outcome.converged else "NOT converged"
+    lines = [
+        f"scenario {outcome.scenario.name!r}: {status} after {outcome.sim_time_s:.2f} s simulated"
+        f" ({outcome.wall_s:.2f} s wall); estimates at t = {outcome.final.time_s:.2f} s",
+        "ctc = contact_to_com = p_C - p_Ci (world frame); z_ij err: worst over i's neighbours",
+        "",
+        _HEADER,
+        "-" * len(_HEADER),
+    ]
+    for i in range(1, outcome.scenario.n + 1):
+        est = outcome.final.estimates.get(i)
+        errs = robot_errors(outcome, i)
+        if est is None:
+            lines.append(_table_row(str(i), None, None, None, errs))
+        else:
+            lines.append(_table_row(str(i), est.mass, est.moment, est.contact_to_com, errs))
+    lines.append(_table_row("truth", truth.mass, truth.moment, None, {}))
+    lines.append(_table_row("worst", None, None, None, errors(outcome)))
+    lines += ["", f"{'paper step':<30} {'start':>7}    {'end':>7}"]
+    for row in step_times(outcome):
+        label = f"{row['step']} {row['name']}"
+        lines.append(f"{label:<30} {_time(row['start_s'])}  {_time(row['end_s'])}")
+    regimes = ", ".join(f"{name} {t:.2f} s" for name, t in team_phases(outcome).items())
+    lines.append("(start: the first robot began the step; end: the last robot's estimate settled)")
+    lines.append(f"team force regimes from: {regimes or '-'}")
+    return "\n".join(lines)

@@ -1,0 +1,241 @@
+"""The plant: a pymunk rigid body standing in for the real load and the robots' drivers.
+
+The agents never see this module's state directly. Each sensor tick they get one
+:class:`~agent.protocol.Measurement` per robot from :meth:`Plant.measure` (the velocity of the
+robot's contact point and the force it applied, both with optional Gaussian noise), and they
+answer with :meth:`Plant.command` (the force to apply until the next tick).
+:meth:`Plant.advance` then integrates one sensor period. :meth:`Plant.truth` exposes the ground
+truth for evaluation only.
+
+Conventions (those of the paper, see ``/work/shared/notes/paper-notes.md``):
+
+- Frames: the world frame ``W`` and the load frame, whose origin sits at
+  ``scenario.body.position`` and whose angle in ``W`` is ``scenario.body.angle`` at ``t = 0``.
+  The polygon, the COM and the contact points of the scenario are given in the load frame.
+- ``Q = [[0, -1], [1, 0]]``, ``v⊥ = Q v``; the torque of ``f_i`` applied at ``C_i`` is
+  ``τ_i = (p_Ci − p_C)⊥ᵀ f_i``; a rigid body obeys ``ṗ_Ci = ṗ_C + ω (p_Ci − p_C)⊥``.
+- ``p_G`` is the centroid of the contact points, ``z_i = p_Ci − p_G``, ``z_C = p_G − p_C``.
+- Robot ids are ``1..n``; robot ``i`` pushes at ``scenario.contacts[i - 1]``.
+- Tick ``k`` is the instant ``t_k = k / rate_hz``. A force commanded after sample ``k`` is held
+  constant (in ``W``) during ``[t_k, t_{k+1}]`` and reported by the measurement of tick ``k + 1``.
+
+Implementation notes (pymunk 7): the body carries the scenario's mass and moment and has no
+shapes (a shape with a density would override them); space gravity is zero and damping is off;
+``body.force``/``body.torque`` are cleared by every step, so the held forces are re-applied at
+the contacts' *current* world points before every physics substep. The per-substep path uses
+plain floats and pymunk calls only (no numpy) to keep the plant far faster than real time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pymunk
+from pymunk import Vec2d
+
+from agent.protocol import Measurement
+
+if TYPE_CHECKING:
+    from simulator.scenario import Scenario
+
+Vec2 = tuple[float, float]
+
+_ZERO: Vec2 = (0.0, 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Truth:
+    """The load's ground truth at ``tick`` (vectors in ``W``). For evaluation only: never given
+    to agents."""
+
+    tick: int
+    time_s: float
+    com_position: Vec2
+    """``p_C``."""
+    angle: float
+    """Angle of the load frame in ``W`` (rad)."""
+    com_velocity: Vec2
+    """``ṗ_C``."""
+    omega: float
+    """``ω``."""
+    contacts: tuple[Vec2, ...]
+    """``p_Ci``, robot ``1..n`` order."""
+    contact_velocities: tuple[Vec2, ...]
+    """``ṗ_Ci``."""
+    contact_to_com: tuple[Vec2, ...]
+    """``p_C − p_Ci``."""
+    mass: float
+    moment: float
+    """Moment of inertia about the COM."""
+
+    @property
+    def centroid(self) -> Vec2:
+        """``p_G``, the centroid of the contact points."""
+        n = len(self.contacts)
+        return (
+            math.fsum(p[0] for p in self.contacts) / n,
+            math.fsum(p[1] for p in self.contacts) / n,
+        )
+
+    @property
+    def centroid_offsets(self) -> tuple[Vec2, ...]:
+        """``z_i = p_Ci − p_G``."""
+        gx, gy = self.centroid
+        return tuple((x - gx, y - gy) for x, y in self.contacts)
+
+    @property
+    def com_offset(self) -> Vec2:
+        """``z_C = p_G − p_C``."""
+        gx, gy = self.centroid
+        return (gx - self.com_position[0], gy - self.com_position[1])
+
+
+class Plant:
+    """The simulated load pushed by ``scenario.n`` robots (see the module docstring)."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        spec = scenario.body
+        if scenario.substeps < 1:
+            raise ValueError("physics_hz must be at least the sensor rate")
+        self._n: int = scenario.n
+        self._period: float = scenario.period_s
+        self._substeps: int = scenario.substeps
+        self._dt: float = 1.0 / scenario.run.physics_hz
+        self._velocity_noise: float = float(scenario.sensors.velocity_noise_std)
+        self._force_noise: float = float(scenario.sensors.force_noise_std)
+        self._rng = np.random.default_rng(scenario.run.seed)
+
+        self._space = pymunk.Space()
+        self._space.gravity = (0.0, 0.0)
+        self._space.damping = 1.0  # 1.0 = no damping
+        body = pymunk.Body(float(spec.mass), float(spec.moment), body_type=pymunk.Body.DYNAMIC)
+        body.center_of_gravity = (float(spec.com[0]), float(spec.com[1]))
+        # The angle first: setting it keeps the COM fixed in W and moves the load-frame origin,
+        # while setting the position places the origin. Done in this order, both are as given.
+        body.angle = float(spec.angle)
+        body.position = (float(spec.position[0]), float(spec.position[1]))
+        self._space.add(body)  # no shapes: they would override mass and moment
+        self._body = body
+        self._cog = Vec2d(float(spec.com[0]), float(spec.com[1]))
+        self._local: tuple[Vec2d, ...] = tuple(
+            Vec2d(float(x), float(y)) for x, y in scenario.contacts
+        )
+        self._arms: tuple[Vec2, ...] = tuple(
+            (p.x - self._cog.x, p.y - self._cog.y) for p in self._local
+        )
+
+        self._commanded: list[Vec2] = [_ZERO] * self._n
+        self._applied: tuple[Vec2, ...] = (_ZERO,) * self._n
+        self.tick: int = 0
+
+    @property
+    def n(self) -> int:
+        """Number of robots."""
+        return self._n
+
+    @property
+    def time_s(self) -> float:
+        """Time of the current tick, ``tick * period``."""
+        return self.tick * self._period
+
+    def measure(self) -> list[Measurement]:
+        """Every robot's sample at the current tick (index ``robot - 1``).
+
+        ``velocity`` is the contact point's velocity, ``force`` the force applied during the
+        last period (zero at tick 0), each plus ``N(0, σ²)`` noise per axis when σ > 0.
+        """
+        body = self._body
+        to_world = body.local_to_world
+        velocity_at = body.velocity_at_world_point
+        velocities = [velocity_at(to_world(p)) for p in self._local]
+        forces = self._applied
+        tick, time_s, n = self.tick, self.time_s, self._n
+        if self._velocity_noise > 0.0:
+            dv = self._rng.normal(0.0, self._velocity_noise, size=(n, 2)).tolist()
+        else:
+            dv = [_ZERO] * n
+        if self._force_noise > 0.0:
+            df = self._rng.normal(0.0, self._force_noise, size=(n, 2)).tolist()
+        else:
+            df = [_ZERO] * n
+        return [
+            Measurement(
+                robot=i + 1,
+                tick=tick,
+                time_s=time_s,
+                velocity=(v.x + dv[i][0], v.y + dv[i][1]),
+                force=(forces[i][0] + df[i][0], forces[i][1] + df[i][1]),
+            )
+            for i, v in enumerate(velocities)
+        ]
+
+    def command(self, robot: int, force: Sequence[float]) -> None:
+        """Hold ``force`` (in ``W``) at robot ``robot``'s contact from the next :meth:`advance`.
+
+        Raises :class:`ValueError` if ``robot`` is not in ``1..n`` or ``force`` is not two
+        finite numbers.
+        """
+        if isinstance(robot, bool) or not isinstance(robot, int) or not 1 <= robot <= self._n:
+            raise ValueError(f"robot must be an integer in 1..{self._n}, got {robot!r}")
+        if len(force) != 2:
+            raise ValueError(f"force must have two components, got {force!r}")
+        fx, fy = float(force[0]), float(force[1])
+        if not (math.isfinite(fx) and math.isfinite(fy)):
+            raise ValueError(f"force must be finite, got {force!r}")
+        self._commanded[robot - 1] = (fx, fy)
+
+    def reset_commands(self) -> None:
+        """Set every robot's held force to zero (from the next :meth:`advance`)."""
+        self._commanded = [_ZERO] * self._n
+
+    def advance(self) -> None:
+        """Integrate one sensor period: ``substeps`` steps of ``1 / physics_hz``, the held
+        forces applied at the contacts' current world points before every step.
+
+        The forces are fixed in ``W`` over the period, so their sum is too; only their torque
+        about the COM changes as the load turns. With ``a_i`` a contact's arm from the COM in
+        the load frame and ``θ`` the load's angle, ``τ = Σ (R(θ) a_i) × f_i = cos θ A − sin θ B``
+        with ``A = Σ a_i × f_i`` and ``B = Σ a_i · f_i``: the same as applying each force at its
+        contact's world point, at two numbers per substep.
+        """
+        applied = tuple(self._commanded)
+        fx = sum(f[0] for f in applied)
+        fy = sum(f[1] for f in applied)
+        cross_sum = sum(a[0] * f[1] - a[1] * f[0] for a, f in zip(self._arms, applied))
+        dot_sum = sum(a[0] * f[0] + a[1] * f[1] for a, f in zip(self._arms, applied))
+        body = self._body
+        step = self._space.step
+        dt = self._dt
+        force = Vec2d(fx, fy)
+        for _ in range(self._substeps):
+            angle = body.angle
+            body.force = force
+            body.torque = math.cos(angle) * cross_sum - math.sin(angle) * dot_sum
+            step(dt)
+        self._applied = applied
+        self.tick += 1
+
+    def truth(self) -> Truth:
+        """The ground truth at the current tick."""
+        body = self._body
+        to_world = body.local_to_world
+        velocity_at = body.velocity_at_world_point
+        com = to_world(self._cog)
+        contacts = [to_world(p) for p in self._local]
+        return Truth(
+            tick=self.tick,
+            time_s=self.time_s,
+            com_position=(com.x, com.y),
+            angle=body.angle,
+            com_velocity=(body.velocity.x, body.velocity.y),
+            omega=body.angular_velocity,
+            contacts=tuple((p.x, p.y) for p in contacts),
+            contact_velocities=tuple((v.x, v.y) for v in map(velocity_at, contacts)),
+            contact_to_com=tuple((com.x - p.x, com.y - p.y) for p in contacts),
+            mass=body.mass,
+            moment=body.moment,
+        )

@@ -1,0 +1,873 @@
+"""The estimators of ``agent.estimation`` (and ``agent.safety``) against closed forms.
+
+Every expected value is computed here, independently of the code under test: rotation matrices
+and ``Q = [[0, -1], [1, 0]]`` in numpy, analytic trajectories (``y = θ sin t``, uniformly or
+uniformly accelerated rotating bodies, constant-acceleration translation), analytic first-order
+filters (complex exponentials), or a fine Runge-Kutta integration of the paper's dynamics.
+Conventions (paper notes): ``v⊥ = Q v``, ``a × b = (a⊥)ᵀ b``, ``ż_ij = ω z_ij⊥``.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from itertools import pairwise
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.estimation.angular_velocity import angular_velocity
+from agent.estimation.centroid import centroid_step
+from agent.estimation.com_observer import ComObserver
+from agent.estimation.com_regression import ComRegression
+from agent.estimation.com_velocity import com_velocity
+from agent.estimation.consensus import average_consensus_step, metropolis_weight
+from agent.estimation.excitation import kick_force, spin_up_force
+from agent.estimation.filtered_regression import FilteredRegression
+from agent.estimation.geometry import (
+    angle_between,
+    arc_factor,
+    cross,
+    gamma,
+    perp,
+    rotate,
+)
+from agent.estimation.inertia import InertiaEstimator, inertia_force
+from agent.estimation.mass import MassEstimator
+from agent.estimation.relative_position import RelativePosition
+from agent.estimation.settling import SettleDetector
+from agent.safety import saturate
+
+Q = np.array([[0.0, -1.0], [1.0, 0.0]])
+FAST = settings(max_examples=50, deadline=None)
+
+angles = st.floats(-math.pi, math.pi, allow_nan=False)
+lengths = st.floats(0.05, 5.0, allow_nan=False)
+coords = st.floats(-10.0, 10.0, allow_nan=False)
+
+
+def rot(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def polar(r: float, a: float) -> np.ndarray:
+    return np.array([r * math.cos(a), r * math.sin(a)])
+
+
+def sample_times(rng: np.random.Generator | None, duration: float, dt: float = 0.01) -> list:
+    """``0, dt, 2 dt, …`` (regular) or random intervals in ``[dt/5, 2 dt]`` (irregular)."""
+    if rng is None:
+        return [k * dt for k in range(round(duration / dt) + 1)]
+    steps = rng.uniform(0.2 * dt, 2.0 * dt, size=round(2 * duration / dt))
+    times = np.concatenate([[0.0], np.cumsum(steps)])
+    return [float(t) for t in times[times <= duration]]
+
+
+# --------------------------------------------------------------------------------------------
+# geometry
+# --------------------------------------------------------------------------------------------
+
+
+@FAST
+@given(coords, coords)
+def test_perp_is_q_times_v(x, y):
+    assert perp((x, y)) == pytest.approx(tuple(Q @ np.array([x, y])), abs=0.0)
+    assert perp((1.0, 0.0)) == (-0.0, 1.0)  # e_x⊥ = e_y
+
+
+@FAST
+@given(coords, coords, coords, coords)
+def test_cross_is_perp_transpose_times_b(ax, ay, bx, by):
+    a, b = np.array([ax, ay]), np.array([bx, by])
+    expected = float((Q @ a) @ b)
+    assert cross((ax, ay), (bx, by)) == pytest.approx(expected, abs=1e-12)
+    assert cross((ax, ay), (bx, by)) == pytest.approx(-cross((bx, by), (ax, ay)), abs=1e-12)
+
+
+def test_cross_orientation():
+    assert cross((1.0, 0.0), (0.0, 1.0)) == 1.0
+    assert cross((0.0, 1.0), (1.0, 0.0)) == -1.0
+    assert cross((2.0, 3.0), (4.0, 6.0)) == 0.0
+
+
+@FAST
+@given(coords, coords, angles)
+def test_rotate_is_rotation_matrix(x, y, angle):
+    expected = rot(angle) @ np.array([x, y])
+    assert rotate((x, y), angle) == pytest.approx(tuple(expected), abs=1e-12)
+
+
+def test_rotate_quarter_turn_is_counter_clockwise():
+    assert rotate((1.0, 0.0), math.pi / 2) == pytest.approx((0.0, 1.0), abs=1e-15)
+    assert rotate((0.0, 1.0), -math.pi / 2) == pytest.approx((1.0, 0.0), abs=1e-15)
+
+
+@FAST
+@given(lengths, angles, st.floats(-math.pi + 1e-6, math.pi - 1e-6), lengths)
+def test_angle_between_recovers_signed_angle(r, a, phi, scale):
+    v = polar(r, a)
+    w = scale * (rot(phi) @ v)
+    assert angle_between(tuple(v), tuple(w)) == pytest.approx(phi, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    "a, b",
+    [((1.0, 0.0), (-1.0, 0.0)), ((0.0, 1.0), (0.0, -1.0)), ((-1.0, 0.0), (1.0, 0.0))],
+)
+def test_angle_between_antiparallel_is_plus_pi(a, b):
+    # The docstring promises a result in (-π, π]: opposite directions must give +π.
+    assert angle_between(a, b) == math.pi
+
+
+@FAST
+@given(lengths, angles, lengths, angles, angles)
+def test_gamma_maps_by_the_rigid_rotation(r1, a1, r2, a2, turn):
+    z1, z2, rotation = polar(r1, a1), polar(r2, a2), rot(turn)
+    got = gamma(tuple(z1), tuple(z2), tuple(rotation @ z1))
+    assert got == pytest.approx(tuple(rotation @ z2), abs=1e-9 * max(1.0, r2))
+
+
+def test_gamma_as_printed_denominator_is_wrong_unless_unit_length():
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        r1 = rng.uniform(0.1, 4.0)
+        z1, z2, rotation = (
+            polar(r1, rng.uniform(-3, 3)),
+            rng.normal(size=2),
+            rot(rng.uniform(-3, 3)),
+        )
+        z1_after = rotation @ z1
+        numerator = (z2 @ z1) * z1_after + (z2 @ (Q @ z1)) * (Q @ z1_after)
+        printed = numerator / np.linalg.norm(z1)  # eq. (4) as printed
+        truth = rotation @ z2
+        # Printed = truth · ‖z1‖: off by |‖z1‖ − 1|·‖z2‖ — wrong whenever ‖z1‖ ≠ 1.
+        assert np.linalg.norm(printed - truth) == pytest.approx(
+            abs(r1 - 1.0) * np.linalg.norm(z2), rel=1e-9, abs=1e-12
+        )
+        assert gamma(tuple(z1), tuple(z2), tuple(z1_after)) == pytest.approx(tuple(truth), abs=1e-9)
+    # With ‖z1‖ = 1 both denominators agree.
+    z1, z2, rotation = polar(1.0, 0.3), np.array([0.2, -1.5]), rot(1.1)
+    numerator = (z2 @ z1) * (rotation @ z1) + (z2 @ (Q @ z1)) * (Q @ rotation @ z1)
+    assert tuple(numerator) == pytest.approx(tuple(rotation @ z2), abs=1e-12)
+
+
+@pytest.mark.parametrize("turn", [-2.5, -1.0, -0.3, -1e-5, 0.0, 3e-5, 2e-4, 0.01, 0.3, 1.0, 2.5])
+@pytest.mark.parametrize("dt", [0.01, 0.7])
+def test_arc_factor_makes_trapezoid_exact_for_uniform_rotation(turn, dt):
+    v0 = np.array([0.8, -1.3])
+    omega = turn / dt
+    v1 = rot(turn) @ v0
+    if turn == 0.0:
+        exact = dt * v0
+    else:
+        # ∫₀^dt R(ωt) v0 dt = (1/ω) Q⁻¹ (R(ω dt) − I) v0, since d/dt R(ωt) = ω Q R(ωt);
+        # R(φ) − I written with cos φ − 1 = −2 sin²(φ/2) to avoid cancellation.
+        c1, s1 = -2.0 * math.sin(0.5 * turn) ** 2, math.sin(turn)
+        exact = (Q.T @ np.array([[c1, -s1], [s1, c1]]) @ v0) / omega
+    trapezoid = 0.5 * dt * (v0 + v1)
+    got = trapezoid * arc_factor(turn)
+    assert tuple(got) == pytest.approx(tuple(exact), rel=1e-12, abs=1e-15)
+    if abs(turn) >= 0.3:  # the plain trapezoid is visibly wrong at such turns
+        assert np.linalg.norm(trapezoid - exact) > 1e-3 * np.linalg.norm(exact)
+
+
+# --------------------------------------------------------------------------------------------
+# filtered regression (Appendix, eq. 26)
+# --------------------------------------------------------------------------------------------
+
+
+def run_scalar(theta, times, kf=5.0, forgetting=1.0, y0=0.3):
+    """ẏ = θ u with u = cos t, y = y0 + θ sin t."""
+    est = FilteredRegression(kf, outputs=1, params=1, forgetting=forgetting)
+    est.start((y0 + theta * math.sin(times[0]),))
+    for t0, t1 in pairwise(times):
+        est.update((y0 + theta * math.sin(t1),), ((math.sin(t1) - math.sin(t0),),), t1 - t0)
+    return est
+
+
+@pytest.mark.parametrize("irregular", [False, True])
+@pytest.mark.parametrize("theta", [2.5, -0.37, 1e-3])
+def test_filtered_regression_scalar_exact(theta, irregular):
+    rng = np.random.default_rng(11) if irregular else None
+    est = run_scalar(theta, sample_times(rng, 10.0))
+    assert est.estimate[0] == pytest.approx(theta, abs=1e-9)
+
+
+@pytest.mark.parametrize("irregular", [False, True])
+def test_filtered_regression_two_parameters_exact(irregular):
+    """ẏ = φ(t)ᵀ c with φ = (cos t, sin t): y = c1 sin t − c2 cos t."""
+    c = (0.7, -1.9)
+    rng = np.random.default_rng(12) if irregular else None
+    times = sample_times(rng, 10.0)
+
+    def y(t):
+        return c[0] * math.sin(t) - c[1] * math.cos(t) + 4.0
+
+    est = FilteredRegression(3.0, outputs=1, params=2)
+    est.start((y(times[0]),))
+    for t0, t1 in pairwise(times):
+        integral = (math.sin(t1) - math.sin(t0), math.cos(t0) - math.cos(t1))
+        est.update((y(t1),), (integral,), t1 - t0)
+    assert est.estimate == pytest.approx(c, abs=1e-9)
+
+
+def test_filtered_regression_two_outputs_exact():
+    """y ∈ R²: ẏ = θ (cos t, 2 cos 2t), y = θ (sin t, sin 2t)."""
+    theta = -0.8
+    times = sample_times(np.random.default_rng(13), 6.0)
+    est = FilteredRegression(5.0, outputs=2, params=1)
+    est.start((0.0, 0.0))
+    for t0, t1 in pairwise(times):
+        y = (theta * math.sin(t1), theta * math.sin(2 * t1))
+        integral = ((math.sin(t1) - math.sin(t0),), (math.sin(2 * t1) - math.sin(2 * t0),))
+        est.update(y, integral, t1 - t0)
+    assert est.estimate[0] == pytest.approx(theta, abs=1e-9)
+
+
+def test_filtered_regression_none_before_excitation():
+    est = FilteredRegression(5.0, outputs=1, params=1)
+    assert est.estimate is None
+    est.start((1.0,))
+    assert est.estimate is None
+    for _ in range(50):  # u = 0: y stays put, nothing to learn from
+        est.update((1.0,), ((0.0,),), 0.01)
+    assert est.estimate is None
+    assert est.information == 0.0
+    est.update((1.0 + 2.0 * 0.01,), ((0.01,),), 0.01)  # u = 1 for one interval, θ = 2
+    assert est.estimate[0] == pytest.approx(2.0, abs=1e-12)
+
+    two = FilteredRegression(5.0, outputs=1, params=2)
+    two.start((0.0,))
+    for k in range(100):  # φ = (1, 0) for ever: the second parameter is not determined
+        two.update(((k + 1) * 0.01 * 0.5,), ((0.01, 0.0),), 0.01)
+    assert two.estimate is None
+    assert two.information == pytest.approx(0.0, abs=1e-12)
+
+
+def test_filtered_regression_rejects_bad_arguments():
+    with pytest.raises(ValueError):
+        FilteredRegression(5.0, outputs=1, params=3)
+    with pytest.raises(ValueError):
+        FilteredRegression(5.0, outputs=1, params=1, forgetting=0.0)
+    with pytest.raises(ValueError):
+        FilteredRegression(5.0, outputs=1, params=1, forgetting=1.5)
+
+
+def _jump_run(forgetting):
+    """θ = 2 on [0, 5], θ = −1 on [5, 10]; y continuous, sampled at 100 Hz."""
+    est = FilteredRegression(5.0, outputs=1, params=1, forgetting=forgetting)
+
+    def y(k):
+        t = k * 0.01
+        if k <= 500:
+            return 2.0 * math.sin(t)
+        return 2.0 * math.sin(5.0) - (math.sin(t) - math.sin(5.0))
+
+    est.start((y(0),))
+    for k in range(1, 1001):
+        integral = math.sin(k * 0.01) - math.sin((k - 1) * 0.01)
+        est.update((y(k),), ((integral,),), 0.01)
+        if k == 500:
+            before = est.estimate[0]
+    return before, est.estimate[0]
+
+
+def test_filtered_regression_forgetting_tracks_a_jump():
+    before, after = _jump_run(0.95)
+    assert before == pytest.approx(2.0, abs=1e-9)
+    assert after == pytest.approx(-1.0, abs=1e-6)
+    _, stuck = _jump_run(1.0)  # without forgetting the old data dominate
+    assert abs(stuck + 1.0) > 0.1
+
+
+def test_filtered_regression_information_grows():
+    kf = 2.0
+    times = sample_times(np.random.default_rng(14), 8.0)
+    est = FilteredRegression(kf, outputs=1, params=2)
+    est.start((0.0,))
+    s = np.zeros(2)
+    gram = np.zeros((2, 2))
+    last = 0.0
+    grew = 0
+    for t0, t1 in pairwise(times):
+        integral = np.array([math.sin(t1) - math.sin(t0), math.cos(t0) - math.cos(t1)])
+        est.update((0.0,), (tuple(integral),), t1 - t0)
+        s = math.exp(-kf * (t1 - t0)) * s + integral
+        gram += np.outer(s, s)
+        expected = np.linalg.eigvalsh(gram)[0]
+        assert est.information == pytest.approx(expected, rel=1e-6, abs=1e-12)
+        assert est.information >= last - 1e-15
+        grew += est.information > last
+        last = est.information
+    assert last > 0.1 and grew > len(times) // 2
+
+
+# --------------------------------------------------------------------------------------------
+# relative position (Prop. IV.1, eqs. 10-12 corrected)
+# --------------------------------------------------------------------------------------------
+
+
+class Body:
+    """Two points ``r_i``, ``r_j`` (body frame) of a rigid body at rotation ``alpha(t)`` and an
+    arbitrary translation: exact contact velocities."""
+
+    def __init__(self, ri, rj, omega, alpha):
+        self.ri, self.rj = np.asarray(ri), np.asarray(rj)
+        self.omega, self.alpha = omega, alpha
+
+    def translation_velocity(self, t):
+        return np.array([0.3 * math.cos(t) - 1.0, 2.0 - t])
+
+    def velocity(self, r, t):
+        return self.translation_velocity(t) + self.omega(t) * (Q @ rot(self.alpha(t)) @ r)
+
+    def zdot(self, t):
+        return self.velocity(self.ri, t) - self.velocity(self.rj, t)
+
+    def z(self, t):
+        return rot(self.alpha(t)) @ (self.ri - self.rj)
+
+
+@pytest.mark.parametrize("omega", [0.7, -0.7, 3.0, -2.2, 0.05, -0.05])
+def test_relative_position_constant_omega(omega):
+    rng = np.random.default_rng(round(1000 * abs(omega)) + (omega < 0))
+    ri, rj, a0 = rng.uniform(-2, 2, 2), rng.uniform(-2, 2, 2), rng.uniform(-3, 3)
+    body = Body(ri, rj, lambda t: omega, lambda t: a0 + omega * t)
+    rp = RelativePosition(5.0)
+    assert rp.relative_position is None and rp.distance is None and rp.omega_sign == 0.0
+    times = sample_times(None, 5.0)
+    for t in times:
+        rp.update(tuple(body.zdot(t)), t)
+    z = body.z(times[-1])
+    assert rp.distance == pytest.approx(np.linalg.norm(z), rel=1e-6)
+    assert np.linalg.norm(np.array(rp.relative_position) - z) < 1e-6
+    assert rp.omega_sign == math.copysign(1.0, omega)
+
+
+def _sign_change_body():
+    # ω(t) = 0.5 − 0.2 t: zero at t = 2.5 s; α(t) = 0.4 + 0.5 t − 0.1 t².
+    return Body(
+        (0.7, -0.2), (-0.5, 0.9), lambda t: 0.5 - 0.2 * t, lambda t: 0.4 + 0.5 * t - 0.1 * t * t
+    )
+
+
+def test_relative_position_tracks_through_a_sign_change_after_learning():
+    body = _sign_change_body()
+    rp = RelativePosition(5.0)
+    for t in sample_times(None, 5.0):
+        if t >= 2.0:
+            rp.learning = False
+        rp.update(tuple(body.zdot(t)), t)
+        if t > 1.0 and abs(t - 2.5) > 1e-9:  # (at t = 2.5 s ż = 0: no sample)
+            z = body.z(t)
+            assert np.linalg.norm(np.array(rp.relative_position) - z) < 1e-6, t
+            assert rp.omega_sign == math.copysign(1.0, body.omega(t)), t
+    assert rp.omega_sign == -1.0
+    assert rp.distance == pytest.approx(np.linalg.norm(body.z(0.0)), rel=1e-6)
+
+
+def test_relative_position_learning_through_a_sign_change():
+    body = _sign_change_body()
+    rp = RelativePosition(5.0)
+    for t in sample_times(None, 5.0):
+        rp.update(tuple(body.zdot(t)), t)
+    assert np.linalg.norm(np.array(rp.relative_position) - body.z(5.0)) < 1e-6
+    assert rp.omega_sign == -1.0
+
+
+def test_relative_position_ignores_a_load_at_rest():
+    rp = RelativePosition(5.0)
+    for k in range(20):
+        rp.update((0.0, 0.0), 0.01 * k)
+    assert rp.relative_position is None and rp.direction is None
+
+
+@pytest.mark.parametrize("omega", [0.8, -0.8, 2.0, -0.3])
+def test_eq12_corrected_sign_rule_and_distance(omega):
+    """Eq. (12) as corrected, on the exact (continuous) filtered signals.
+
+    Complex numbers stand for planar vectors (``v⊥ = i v``). With ``z(t) = z0 e^{iωt}``:
+    ``ż = iω z``, ``y = ż⊥/‖ż‖``. A first-order filter ``ẋ^f = k(x − x^f)`` of ``A e^{iωt}``
+    from ``x^f(0)`` is ``k/(k+iω) A e^{iωt} + (x^f(0) − k/(k+iω) A) e^{−kt}``; the Appendix
+    starts ``y^f(0) = y(0)`` and ``ż^f(0) = 0``.
+    """
+    kf, t = 5.0, 3.0
+    z0 = complex(1.2, -0.5)
+    dist = abs(z0)
+    gain = kf / (kf + 1j * omega)
+    z = z0 * cmath.exp(1j * omega * t)
+    zdot = 1j * omega * z
+    y = 1j * zdot / abs(zdot)
+    a_y = 1j * (1j * omega * z0) / abs(omega * z0)  # y = a_y e^{iωt}
+    yf = gain * a_y * cmath.exp(1j * omega * t) + (a_y - gain * a_y) * math.exp(-kf * t)
+    zdotf = gain * (1j * omega * z0) * (cmath.exp(1j * omega * t) - math.exp(-kf * t))
+
+    def dot(a, b):
+        return (a.conjugate() * b).real
+
+    # Corrected eq. (10): z = −sign(ω) ‖z‖ y (the printed "+sign(ω)" gives −z).
+    assert abs(-math.copysign(dist, omega) * y - z) < 1e-12
+    assert abs(math.copysign(dist, omega) * y + z) < 1e-12
+    # Corrected eq. (12) and the sign rule after it.
+    assert abs(zdotf) / (kf * abs(y - yf)) == pytest.approx(dist, rel=1e-12)
+    sign_rule = -math.copysign(1.0, dot(zdotf, y - yf))
+    assert sign_rule == math.copysign(1.0, omega)
+
+    # The estimator agrees with the closed form.
+    body = Body((z0.real, z0.imag), (0.0, 0.0), lambda s: omega, lambda s: omega * s)
+    rp = RelativePosition(kf)
+    for s in sample_times(None, t):
+        rp.update(tuple(body.zdot(s)), s)
+    assert rp.omega_sign == sign_rule
+    assert rp.distance == pytest.approx(abs(zdotf) / (kf * abs(y - yf)), rel=1e-6)
+    assert rp.relative_position == pytest.approx((z.real, z.imag), abs=1e-6)
+
+
+# --------------------------------------------------------------------------------------------
+# angular velocity (eq. 5 corrected), COM velocity (eq. 7)
+# --------------------------------------------------------------------------------------------
+
+
+@FAST
+@given(lengths, angles, st.floats(-5.0, 5.0, allow_nan=False))
+def test_angular_velocity_eq5(r, a, omega):
+    z = polar(r, a)
+    zdot = omega * (Q @ z)
+    assert angular_velocity(tuple(z), tuple(zdot)) == pytest.approx(omega, abs=1e-12)
+
+
+@FAST
+@given(lengths, angles, st.floats(-3.0, 3.0), st.floats(0.0, 10.0), coords, coords)
+def test_com_velocity_eq7_on_a_rigid_body(r, a0, omega, t, vx, vy):
+    # p_C(t) = p0 + v t + ½ a t², α(t) = a0 + ω t; contact at body offset r_b.
+    acc = np.array([0.2, -0.1])
+    body_offset = polar(r, 0.7)
+    v_c = np.array([vx, vy]) + acc * t
+    offset = rot(a0 + omega * t) @ body_offset  # p_Ci − p_C
+    v_contact = v_c + omega * (Q @ offset)  # d/dt [p_C + R(α) r_b]
+    got = com_velocity(tuple(v_contact), omega, tuple(offset))
+    assert got == pytest.approx(tuple(v_c), abs=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# centroid (Aragues et al.) and average consensus (eq. 16)
+# --------------------------------------------------------------------------------------------
+
+
+def graph(kind: str, n: int) -> list[tuple[int, int]]:
+    if kind == "path":
+        return [(i, i + 1) for i in range(n - 1)]
+    if kind == "ring":
+        return [(i, (i + 1) % n) for i in range(n)]
+    if kind == "star":
+        return [(0, i) for i in range(1, n)]
+    raise ValueError(kind)
+
+
+def neighbours_of(n, edges):
+    nb = {i: [] for i in range(n)}
+    for i, j in edges:
+        nb[i].append(j)
+        nb[j].append(i)
+    return nb
+
+
+@pytest.mark.parametrize("kind", ["path", "ring", "star"])
+def test_metropolis_weights_and_centroid(kind):
+    n = 6
+    rng = np.random.default_rng(21)
+    p = rng.uniform(-3, 3, size=(n, 2))
+    truth = p - p.mean(axis=0)
+    nb = neighbours_of(n, graph(kind, n))
+    deg = {i: len(nb[i]) for i in nb}
+    x = {i: (0.0, 0.0) for i in range(n)}
+    for _ in range(3000):
+        new = {}
+        for i in range(n):
+            triples = [(metropolis_weight(deg[i], deg[j]), x[j], tuple(p[i] - p[j])) for j in nb[i]]
+            new[i] = centroid_step(x[i], triples)
+        x = new
+        total = np.sum([x[i] for i in range(n)], axis=0)
+        assert np.all(np.abs(total) < 1e-12)
+    for i in range(n):
+        assert np.linalg.norm(np.array(x[i]) - truth[i]) < 1e-9
+
+
+def test_centroid_step_closed_form():
+    # x_i + Σ a (x_j − x_i + z_ij) by hand.
+    got = centroid_step(
+        (1.0, 2.0), [(0.25, (3.0, -1.0), (0.5, 0.5)), (0.5, (0.0, 0.0), (-1.0, 2.0))]
+    )
+    expected = (
+        1.0 + 0.25 * (3 - 1 + 0.5) + 0.5 * (0 - 1 - 1),
+        2.0 + 0.25 * (-1 - 2 + 0.5) + 0.5 * 0,
+    )
+    assert got == pytest.approx(expected, abs=1e-15)
+
+
+def test_metropolis_weight_values():
+    assert metropolis_weight(1, 1) == 0.5
+    assert metropolis_weight(1, 2) == pytest.approx(1 / 3)
+    assert metropolis_weight(2, 1) == pytest.approx(1 / 3)
+    assert metropolis_weight(3, 5) == pytest.approx(1 / 6)
+    assert metropolis_weight(5, 3) == pytest.approx(1 / 6)
+    # Row sums below 1 on a star: the hub's Σ_j a_ij = d/(1+d).
+    assert 5 * metropolis_weight(5, 1) == pytest.approx(5 / 6)
+
+
+def _consensus_round(xi, nb, deg, changes=None):
+    return {
+        i: average_consensus_step(
+            xi[i],
+            [(metropolis_weight(deg[i], deg[j]), xi[j]) for j in nb[i]],
+            0.0 if changes is None else changes[i],
+        )
+        for i in xi
+    }
+
+
+def test_average_consensus_converges_on_a_path():
+    n = 7
+    nb = neighbours_of(n, graph("path", n))
+    deg = {i: len(nb[i]) for i in nb}
+    r = [3.0, -1.0, 0.5, 8.0, 2.0, 0.0, -4.5]
+    xi = dict(enumerate(r))
+    for _ in range(2000):
+        xi = _consensus_round(xi, nb, deg)
+        assert sum(xi.values()) == pytest.approx(sum(r), abs=1e-12)
+    for v in xi.values():
+        assert v == pytest.approx(sum(r) / n, abs=1e-9)
+
+
+def test_average_consensus_with_changing_inputs():
+    n = 5
+    rng = np.random.default_rng(22)
+    nb = neighbours_of(n, graph("path", n))
+    deg = {i: len(nb[i]) for i in nb}
+    r = rng.uniform(0, 5, n)
+    xi = {i: float(r[i]) for i in range(n)}
+    for step in range(1500):
+        change = rng.normal(size=n) if step < 300 else np.zeros(n)
+        r = r + change
+        xi = _consensus_round(xi, nb, deg, change)
+        assert sum(xi.values()) == pytest.approx(float(r.sum()), abs=1e-9)
+    for v in xi.values():
+        assert v == pytest.approx(float(r.mean()), abs=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# inertia (Sec. V-A), mass (Sec. V-C)
+# --------------------------------------------------------------------------------------------
+
+
+def test_inertia_force_is_k_z_perp_and_pure_torque():
+    k = 1.7
+    assert inertia_force(k, (2.0, -3.0)) == pytest.approx((3.0 * k, 2.0 * k), abs=0.0)
+    rng = np.random.default_rng(31)
+    p = rng.uniform(-2, 2, size=(5, 2))
+    z = p - p.mean(axis=0)
+    forces = np.array([inertia_force(k, tuple(zi)) for zi in z])
+    assert np.abs(forces.sum(axis=0)).max() < 1e-12
+    q = np.array([4.0, -7.0])  # any point
+    torque = sum((Q @ (pi - q)) @ fi for pi, fi in zip(p, forces))
+    assert torque == pytest.approx(k * float((z**2).sum()), rel=1e-12)
+
+
+@pytest.mark.parametrize("irregular", [False, True])
+def test_inertia_estimator_constant_torque(irregular):
+    inertia, torque, w0 = 12.3795, 0.8, -0.3
+    est = InertiaEstimator(5.0)
+    times = sample_times(np.random.default_rng(32) if irregular else None, 4.0)
+    est.update(w0, 0.0, torque)
+    assert est.moment is None
+    for t0, t1 in pairwise(times):
+        est.update(w0 + torque / inertia * t1, t1 - t0, torque)
+    assert est.moment == pytest.approx(inertia, rel=1e-9)
+
+
+def test_inertia_estimator_torque_switching_sign():
+    inertia, torque, w0 = 3.5, 1.2, 0.4
+    est = InertiaEstimator(5.0)
+    omega = w0
+    est.update(omega, 0.0, torque)
+    for k in range(1, 801):
+        tau = torque if k <= 300 else -torque  # reverses at t = 3 s, a sample instant
+        omega += tau / inertia * 0.01
+        est.update(omega, 0.01, tau)
+    # ω(8 s) = w0 + (τ/J)(3 − 5)
+    assert omega == pytest.approx(w0 - 2 * torque / inertia, abs=1e-12)
+    assert est.moment == pytest.approx(inertia, rel=1e-9)
+
+
+@pytest.mark.parametrize("irregular", [False, True])
+def test_mass_estimator(irregular):
+    mass, n, force, v0 = 5.0, 4, (0.3, -0.7), np.array([0.2, 1.0])
+    est = MassEstimator(5.0, n, force)
+    accel = n * np.array(force) / mass
+    times = sample_times(np.random.default_rng(33) if irregular else None, 3.0)
+    est.update(tuple(v0), 0.0)
+    assert est.mass is None
+    for t0, t1 in pairwise(times):
+        est.update(tuple(v0 + accel * t1), t1 - t0)
+    assert est.mass == pytest.approx(mass, rel=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# centre of mass: regression and observer (24)
+# --------------------------------------------------------------------------------------------
+
+
+def rk4(rhs, state, h, steps):
+    for _ in range(steps):
+        k1 = rhs(state)
+        k2 = rhs([s + 0.5 * h * d for s, d in zip(state, k1)])
+        k3 = rhs([s + 0.5 * h * d for s, d in zip(state, k2)])
+        k4 = rhs([s + h * d for s, d in zip(state, k3)])
+        state = [
+            s + h / 6 * (a + 2 * b + 2 * c + d) for s, a, b, c, d in zip(state, k1, k2, k3, k4)
+        ]
+    return state
+
+
+def test_com_regression_regressor_closed_form():
+    n, inertia, f, c = 4, 2.0, np.array([0.3, 0.5]), np.array([0.3, -0.4])
+    reg = ComRegression(5.0, n, inertia, tuple(f))
+    for alpha in np.linspace(-3, 3, 13):
+        omega_dot = (n / inertia) * (Q @ rot(alpha) @ c) @ f  # (n/J) z_C⊥ᵀ f
+        assert np.array(reg.regressor(alpha)) @ c == pytest.approx(omega_dot, abs=1e-12)
+
+
+def test_com_regression_recovers_offset():
+    n, inertia, f, c = 4, 2.0, (0.3, 0.5), (0.3, -0.4)
+    k = n / inertia
+
+    def rhs(s):  # s = (α, ω): α̇ = ω, ω̇ = (n/J) (R(α) c)⊥ᵀ f
+        ca, sa = math.cos(s[0]), math.sin(s[0])
+        zx, zy = ca * c[0] - sa * c[1], sa * c[0] + ca * c[1]
+        return [s[1], k * (-zy * f[0] + zx * f[1])]
+
+    reg = ComRegression(5.0, n, inertia, f)
+    state = [0.0, 1.0]
+    reg.update(state[1], state[0], 0.01)
+    assert reg.reference_offset is None and reg.com_offset(0.0) is None
+    for _ in range(2000):
+        state = rk4(rhs, state, 0.001, 10)
+        reg.update(state[1], state[0], 0.01)
+    assert np.linalg.norm(np.array(reg.reference_offset) - c) < 1e-6
+    for alpha in (state[0], 0.0, -2.0, 1.3):
+        assert np.linalg.norm(np.array(reg.com_offset(alpha)) - rot(alpha) @ c) < 1e-6
+
+
+def _observer_run(force, z0, omega0, n, inertia, seconds=40.0):
+    """Integrate the true planar system in W finely; feed ω at 100 Hz to the observer.
+
+    True system: ż_C = ω z_C⊥, ω̇ = z_C⊥ᵀ f̄, f̄ = (n/J) f — i.e. (19)-(20), which is (21)
+    in coordinates whose y axis is along f. Returns times, V = ½‖e‖², and the W errors."""
+    fb = (n / inertia * force[0], n / inertia * force[1])
+
+    def rhs(s):
+        zx, zy, w = s
+        return [-w * zy, w * zx, -zy * fb[0] + zx * fb[1]]
+
+    obs = ComObserver(n, inertia, force, 1.0, omega0)
+    state = [z0[0], z0[1], omega0]
+    out = []
+    for k in range(1, round(seconds / 0.01) + 1):
+        state = rk4(rhs, state, 0.0005, 20)
+        obs.update(state[2], 0.01)
+        zh = obs.com_offset
+        e = (state[0] - zh[0], state[1] - zh[1], state[2] - obs.state[2])
+        out.append((0.01 * k, 0.5 * (e[0] ** 2 + e[1] ** 2 + e[2] ** 2), math.hypot(*e)))
+    return out, obs, state
+
+
+def _check_observer(out, v0):
+    values = [v0] + [v for _, v, _ in out]
+    for before, after in pairwise(values):
+        # V̇ = −k_e e3² ≤ 0 in continuous time. The observer's RK4 interpolates the sampled ω
+        # linearly, an O(dt²) error: at 100 Hz V can rise by ~1e-9 (≈ 2e-6 V) in one step.
+        assert after <= before + 1e-9 + 1e-5 * before
+    assert values[-1] < 1e-4 * values[0]
+    converged = [t for t, _, err in out if err < 1e-2]
+    assert converged and converged[0] < 40.0
+    assert all(err < 1e-2 for t, _, err in out if t >= converged[0])
+
+
+def test_com_observer_lyapunov_and_convergence():
+    z0, omega0 = (0.3, -0.4), 1.0
+    out, obs, _ = _observer_run((0.0, 1.0), z0, omega0, n=1, inertia=1.0)  # f̄_y = 1
+    _check_observer(out, 0.5 * (z0[0] ** 2 + z0[1] ** 2))
+
+
+def test_com_observer_coordinates_for_a_rotated_force():
+    beta = 2.0  # force direction, not +y
+    fhat = np.array([math.cos(beta), math.sin(beta)])
+    xhat = np.array([fhat[1], -fhat[0]])  # x axis with x⊥ = f̂ (right-handed)
+    assert tuple(Q @ xhat) == pytest.approx(tuple(fhat))
+    n, inertia = 4, 2.0
+    force = tuple(0.5 * fhat)  # f̄ = (n/J)|f| = 1
+    z0 = tuple(0.3 * xhat - 0.4 * fhat)  # (x1, x2) = (0.3, −0.4) as above
+    obs = ComObserver(n, inertia, force, 1.0, 1.0)
+    assert obs.fbar == pytest.approx(1.0)
+    zw = np.array([0.9, -0.25])
+    assert obs.coordinates(tuple(zw), 0.7) == pytest.approx((zw @ xhat, zw @ fhat, 0.7))
+    obs.state = [zw @ xhat, zw @ fhat, 0.7]
+    assert obs.com_offset == pytest.approx(tuple(zw), abs=1e-12)
+
+    out, obs, state = _observer_run(force, z0, 1.0, n, inertia)
+    _check_observer(out, 0.5 * (z0[0] ** 2 + z0[1] ** 2))
+    assert obs.com_offset == pytest.approx((state[0], state[1]), abs=1e-3)
+
+
+# --------------------------------------------------------------------------------------------
+# settling
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("window", [1, 5, 40])
+def test_settle_constant_sequence(window):
+    det = SettleDetector(window, 0.01)
+    # `window` step-to-step changes need `window + 1` values.
+    for tick in range(window):
+        assert det.update((2.0, -1.0), tick) is False
+    assert det.update((2.0, -1.0), window) is True
+    assert det.first_settled == window
+
+
+def test_settle_never_with_large_changes():
+    window, tol = 10, 0.05
+    det = SettleDetector(window, tol)
+    base = 3.0
+    step = 1.5 * tol * (base + 1.0) / window  # above tol·size/window for either value
+    for tick in range(2000):
+        value = base + (step if tick % 2 else 0.0)
+        assert det.update((value,), tick) is False
+    assert det.first_settled is None
+    # Growth: each change ρ·x with ρ > tol(1+ρ)/window.
+    det = SettleDetector(window, tol)
+    x, rho = 1.0, 2.0 * tol / window
+    for tick in range(500):
+        x *= 1.0 + rho
+        assert det.update((x, 0.0), tick) is False
+
+
+def test_settle_small_changes_and_first_tick():
+    window, tol = 4, 0.1
+    det = SettleDetector(window, tol)
+    value = 10.0
+    ticks = list(range(100, 160, 3))
+    for idx, tick in enumerate(ticks[:5]):  # big changes: not settled
+        det.update((value + 5.0 * idx,), tick)
+    assert not det.settled
+    value = 10.0 + 5.0 * 4
+    for idx, tick in enumerate(ticks[5:]):
+        # Changes of half the allowed size per update (the first one measured from the last
+        # big value) keep it settling: settled after `window` of them.
+        value += 0.5 * tol * value / window
+        det.update((value,), tick)
+        if idx < window - 1:
+            assert det.first_settled is None
+    assert det.first_settled == ticks[5 + window - 1]
+    first = det.first_settled
+    det.update((value * 2,), 999)  # a jump: unsettled again, first tick kept
+    assert not det.settled and det.first_settled == first
+    det.reset()
+    assert det.first_settled is None and not det.settled and det.streak == 0
+
+
+def test_settle_uses_floor_near_zero():
+    window, tol, floor = 5, 0.1, 1e-3
+    det = SettleDetector(window, tol, floor)
+    limit = tol * floor / window
+    for tick in range(20):  # around zero: changes of 0.9·limit are tolerated
+        det.update((0.45 * limit * (-1) ** tick,), tick)
+    assert det.settled
+    det = SettleDetector(window, tol, floor)
+    for tick in range(20):
+        det.update((0.55 * limit * (-1) ** tick,), tick)  # changes of 1.1·limit
+    assert not det.settled
+
+
+# --------------------------------------------------------------------------------------------
+# excitation
+# --------------------------------------------------------------------------------------------
+
+
+@FAST
+@given(
+    st.integers(0, 10_000),
+    st.floats(0.05, 2.0),
+    st.booleans(),
+    st.floats(0.1, 5.0),
+    st.floats(0.2, 3.0),
+)
+def test_spin_up_force_net_force_and_torque(seed, speed, negative, gain, target):
+    rng = np.random.default_rng(seed)
+    omega = -speed if negative else speed
+    n = int(rng.integers(2, 7))
+    p = rng.uniform(-2, 2, size=(n, 2))
+    order = rng.permutation(n)
+    edges = {tuple(sorted((int(order[i]), int(order[i + 1])))) for i in range(n - 1)}
+    for _ in range(int(rng.integers(0, n))):
+        i, j = rng.choice(n, size=2, replace=False)
+        edges.add((int(min(i, j)), int(max(i, j))))
+    nb = neighbours_of(n, sorted(edges))
+    ref, v = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 2)
+    vel = [v + omega * (Q @ (p[i] - ref)) for i in range(n)]  # rigid-body velocities
+    forces = np.array(
+        [spin_up_force(gain, target, [tuple(vel[i] - vel[j]) for j in nb[i]]) for i in range(n)]
+    )
+    assert np.abs(forces.sum(axis=0)).max() < 1e-12
+    expected = 0.0
+    for i, j in edges:
+        dist = np.linalg.norm(p[i] - p[j])
+        expected += (1.0 - abs(omega) * dist / target) * dist**2
+    expected *= gain * omega
+    for q in (np.zeros(2), rng.uniform(-5, 5, 2)):
+        torque = sum((Q @ (p[i] - q)) @ forces[i] for i in range(n))
+        assert torque == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+def test_kick_force_magnitude_and_determinism():
+    for seed in (0, 1, 42):
+        for robot in range(1, 6):
+            f = kick_force(seed, robot, 3.5)
+            assert math.hypot(*f) == pytest.approx(3.5, rel=1e-12)
+            assert kick_force(seed, robot, 3.5) == f
+            g = kick_force(seed, robot, 0.5)  # same direction, other magnitude
+            assert g == pytest.approx((f[0] / 7.0, f[1] / 7.0), abs=1e-12)
+    directions = [kick_force(7, robot, 1.0) for robot in range(1, 201)]
+    assert len(set(directions)) == 200
+    mean = np.mean(directions, axis=0)
+    assert np.linalg.norm(mean) < 0.3  # spread over all directions, not one bias
+    assert kick_force(1, 3, 1.0) != kick_force(2, 3, 1.0)
+
+
+# --------------------------------------------------------------------------------------------
+# safety
+# --------------------------------------------------------------------------------------------
+
+
+def test_saturate_closed_forms():
+    assert saturate((3.0, 4.0), 10.0) == (3.0, 4.0)
+    assert saturate((30.0, -40.0), 10.0) == pytest.approx((6.0, -8.0), abs=1e-12)
+    assert saturate((math.nan, 1.0), 10.0) == (0.0, 0.0)
+    assert saturate((1.0, math.inf), 10.0) == (0.0, 0.0)
+    assert saturate((-math.inf, math.nan), 10.0) == (0.0, 0.0)
+    assert saturate((2.0, 0.0), 0.0) == (0.0, 0.0)
+
+
+@FAST
+@given(lengths, angles, st.one_of(st.just(0.0), st.floats(1e-6, 20.0)))
+def test_saturate_bounds_and_keeps_direction(r, a, limit):
+    force = tuple(polar(10 * r, a))
+    got = saturate(force, limit)
+    mag = math.hypot(*got)
+    assert mag <= limit * (1 + 1e-12)
+    assert mag == pytest.approx(min(10 * r, limit), rel=1e-12, abs=1e-300)
+    if mag > 0:
+        assert cross(force, got) == pytest.approx(0.0, abs=1e-9 * 10 * r * mag)
+        assert force[0] * got[0] + force[1] * got[1] > 0
