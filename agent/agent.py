@@ -22,7 +22,13 @@ excite    kick, then geometry-free spin-up        Step 1 ``z_ij``, Step 2 ``z_i`
 inertia   ``f_i = ±k z_i⊥`` (eq. 14)                Step 4 ``J``
 push      common ``f`` (eq. 17)                   Step 5 ``z_C``, Step 6 ``ṗ_C``, Step 7 ``m``
 done      zero: the load coasts                   (tracking goes on)
+halted    zero                                    (a robot was lost: the team stops)
 ======== ======================================= ===========================================
+
+``halted`` is entered by :meth:`Agent.halt` when a neighbour is lost, and reaches the rest of
+the team through the barrier's catch-up rule (it is the highest phase). The paper assumes
+``n`` robots that all push; estimates made without one of them would be wrong, so the team
+stops and says so rather than carrying on.
 """
 
 from __future__ import annotations
@@ -47,8 +53,8 @@ from agent.estimation.settling import SettleDetector
 from agent.protocol import Command, Estimates, Measurement, Share
 from agent.safety import saturate
 
-PHASES = ("excite", "inertia", "push", "done")
-EXCITE, INERTIA, PUSH, DONE = range(4)
+PHASES = ("excite", "inertia", "push", "done", "halted")
+EXCITE, INERTIA, PUSH, DONE, HALTED = range(5)
 HISTORY_TICKS = 64
 
 
@@ -312,6 +318,11 @@ class Agent:
             self.settle[7].update((mass,), e)
 
     # ---------------------------------------------------------------- phases and forces
+    def halt(self) -> None:
+        """Stop the team: from now on this robot applies no force, and every robot that hears
+        of it does the same (see the module docstring)."""
+        self.barrier.halt(HALTED)
+
     def _ready(self, k: int) -> bool:
         phase = self.barrier.phase
         s = self.settle

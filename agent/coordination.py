@@ -38,6 +38,10 @@ class PhaseBarrier:
         self.ready = 0
         self.switch_at = -1
 
+    def halt(self, phase: int) -> None:
+        """Jump to the final ``phase`` at once; neighbours catch up with it."""
+        self._enter(phase)
+
     def step(self, tick: int, own_ready: bool, shares: Iterable[Share]) -> bool:
         """Merge the neighbours' views and our readiness; returns ``True`` if the phase
         changed at this tick (the new phase applies from ``tick`` on)."""

@@ -16,6 +16,9 @@ message stamped ``k`` was produced after sample ``k`` and before sample ``k + 1`
 
 from __future__ import annotations
 
+import json as _json
+import math as _math
+import struct as _struct
 from dataclasses import dataclass, field
 
 Vec2 = tuple[float, float]
@@ -97,3 +100,224 @@ class Estimates:
     contact_to_com: Vec2 | None = None
     started: dict[int, int] = field(default_factory=dict)
     settled: dict[int, int] = field(default_factory=dict)
+
+
+# ====================================================================== on the wire
+# Key expressions: every process of one team lives under ``heft/<team>/``.
+#
+#   heft/<team>/robot/<id>/velocity   Measurement   plant or AGV bridge → agent <id>
+#   heft/<team>/robot/<id>/force      Command       agent <id> → plant or AGV bridge
+#   heft/<team>/robot/<id>/share      Share         agent <id> → its graph neighbours
+#   heft/<team>/robot/<id>/estimate   Estimates     agent <id> → launcher, displays
+#   heft/<team>/robot/<id>/status     Status        agent <id> → launcher, displays
+#   heft/<team>/robot/<id>/alive      (liveliness token of agent <id>)
+#   heft/<team>/plant/clock           Clock         plant → everyone (lockstep and real time)
+#   heft/<team>/plant/truth           Truth         plant → launcher, displays (evaluation only)
+#   heft/<team>/plant/status          plant_status  plant → launcher (counters, latencies)
+#   heft/<team>/control               Control       launcher → everyone (stop)
+#
+# Payloads start with a 3-byte header: magic ``b"H"``, :data:`WIRE_VERSION`, and a kind byte.
+# The per-tick messages (measurement, command, share, clock) are packed with :mod:`struct`
+# (little-endian, fixed size); the occasional ones (estimate, status, truth, control) are UTF-8
+# JSON. :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count
+# and log those, never crash on them.
+
+WIRE_VERSION = 1
+_MAGIC = 0x48
+_HEADER = _struct.Struct("<BBB")
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected kind and version."""
+
+
+class Keys:
+    """The key expressions of one team."""
+
+    def __init__(self, team: str):
+        if not team or any(c in team for c in "/*$?#"):
+            raise ValueError(f"team name {team!r} must be non-empty without / * $ ? #")
+        self.team = team
+        self.root = f"heft/{team}"
+
+    def robot(self, robot: int, topic: str) -> str:
+        """``heft/<team>/robot/<id>/<topic>``; ``robot=0`` gives the wildcard ``*``."""
+        return f"{self.root}/robot/{robot if robot else '*'}/{topic}"
+
+    def plant(self, topic: str) -> str:
+        return f"{self.root}/plant/{topic}"
+
+    @property
+    def control(self) -> str:
+        return f"{self.root}/control"
+
+    @staticmethod
+    def robot_of(key: str) -> int:
+        """The robot id in a ``…/robot/<id>/…`` key (``DecodeError`` if there is none)."""
+        parts = key.split("/")
+        try:
+            return int(parts[parts.index("robot") + 1])
+        except (ValueError, IndexError) as err:
+            raise DecodeError(f"no robot id in key {key!r}") from err
+
+
+@dataclass(frozen=True, slots=True)
+class Clock:
+    """The plant's tick: sample ``tick`` was taken at ``time_s`` (simulated or wall clock)."""
+
+    tick: int
+    time_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class Status:
+    """How an agent is doing: for logs, the launcher and displays."""
+
+    robot: int
+    tick: int
+    phase: str
+    rejected: int = 0
+    decode_errors: int = 0
+    late: int = 0
+    lost_neighbours: tuple[int, ...] = ()
+
+
+# kind byte → (type, struct of the body)
+_MEASUREMENT = _struct.Struct("<Hqd4d")
+_COMMAND = _struct.Struct("<Hq2d")
+_SHARE = _struct.Struct("<Hq2dHB2ddBQq")
+_CLOCK = _struct.Struct("<qd")
+_KIND = {Measurement: 1, Command: 2, Share: 3, Clock: 4, Estimates: 5, Status: 6}
+_JSON_KINDS = {7: "truth", 8: "control", 9: "plant_status"}
+
+
+def _finite(*values: float) -> bool:
+    return all(_math.isfinite(v) for v in values)
+
+
+def encode(message: object) -> bytes:
+    """The wire form of a protocol message."""
+    kind = _KIND.get(type(message))
+    if kind is None:
+        raise TypeError(f"not a protocol message: {type(message).__name__}")
+    head = _HEADER.pack(_MAGIC, WIRE_VERSION, kind)
+    m = message
+    if kind == 1:
+        return head + _MEASUREMENT.pack(m.robot, m.tick, m.time_s, *m.velocity, *m.force)
+    if kind == 2:
+        return head + _COMMAND.pack(m.robot, m.tick, *m.force)
+    if kind == 3:
+        has = m.centroid is not None
+        cx, cy = m.centroid if has else (0.0, 0.0)
+        return head + _SHARE.pack(
+            m.sender,
+            m.tick,
+            *m.velocity,
+            m.degree,
+            has,
+            cx,
+            cy,
+            m.spread,
+            m.phase,
+            m.ready,
+            m.switch_at,
+        )
+    if kind == 4:
+        return head + _CLOCK.pack(m.tick, m.time_s)
+    body = {k: getattr(m, k) for k in m.__dataclass_fields__}
+    if kind == 5:
+        body["relative_positions"] = {str(j): v for j, v in m.relative_positions.items()}
+        body["started"] = {str(s): t for s, t in m.started.items()}
+        body["settled"] = {str(s): t for s, t in m.settled.items()}
+    return head + _json.dumps(body, allow_nan=False, separators=(",", ":")).encode()
+
+
+def encode_json(kind: str, body: dict) -> bytes:
+    """The wire form of a JSON message of ``kind`` ``"truth"``, ``"control"`` or
+    ``"plant_status"``."""
+    code = {v: k for k, v in _JSON_KINDS.items()}[kind]
+    return (
+        _HEADER.pack(_MAGIC, WIRE_VERSION, code)
+        + _json.dumps(body, allow_nan=False, separators=(",", ":")).encode()
+    )
+
+
+def _check_header(payload: bytes, expected: int) -> memoryview:
+    if len(payload) < _HEADER.size:
+        raise DecodeError(f"payload of {len(payload)} bytes is shorter than the header")
+    magic, version, kind = _HEADER.unpack_from(payload)
+    if magic != _MAGIC:
+        raise DecodeError(f"bad magic byte 0x{magic:02x}")
+    if version != WIRE_VERSION:
+        raise DecodeError(f"wire version {version}, this program speaks {WIRE_VERSION}")
+    if kind != expected:
+        raise DecodeError(f"message kind {kind}, expected {expected}")
+    return memoryview(payload)[_HEADER.size :]
+
+
+def _unpack(layout: _struct.Struct, body: memoryview, name: str) -> tuple:
+    if len(body) != layout.size:
+        raise DecodeError(f"{name}: {len(body)} bytes, expected {layout.size}")
+    values = layout.unpack(body)
+    if not _finite(*(v for v in values if isinstance(v, float))):
+        raise DecodeError(f"{name}: non-finite number")
+    return values
+
+
+def _json_body(body: memoryview, name: str) -> dict:
+    try:
+        data = _json.loads(bytes(body))
+    except (UnicodeDecodeError, ValueError) as err:
+        raise DecodeError(f"{name}: not JSON ({err})") from None
+    if not isinstance(data, dict):
+        raise DecodeError(f"{name}: expected a JSON object")
+    return data
+
+
+def decode(kind: type | str, payload: bytes):
+    """Decode ``payload`` as a message of ``kind`` (a message class, or ``"truth"`` /
+    ``"control"`` for the JSON dictionaries); :class:`DecodeError` if it is not one."""
+    if isinstance(kind, str):
+        code = {v: k for k, v in _JSON_KINDS.items()}.get(kind)
+        if code is None:
+            raise ValueError(f"unknown message kind {kind!r}")
+        return _json_body(_check_header(payload, code), kind)
+    code = _KIND[kind]
+    body = _check_header(payload, code)
+    if kind is Measurement:
+        r, t, ts, vx, vy, fx, fy = _unpack(_MEASUREMENT, body, "measurement")
+        return Measurement(r, t, ts, (vx, vy), (fx, fy))
+    if kind is Command:
+        r, t, fx, fy = _unpack(_COMMAND, body, "command")
+        return Command(r, t, (fx, fy))
+    if kind is Share:
+        s, t, vx, vy, deg, has, cx, cy, spread, phase, ready, switch_at = _unpack(
+            _SHARE, body, "share"
+        )
+        return Share(
+            s, t, (vx, vy), deg, (cx, cy) if has else None, spread, phase, ready, switch_at
+        )
+    if kind is Clock:
+        return Clock(*_unpack(_CLOCK, body, "clock"))
+    data = _json_body(body, kind.__name__.lower())
+    try:
+        if kind is Estimates:
+            data["relative_positions"] = {
+                int(j): tuple(v) for j, v in data["relative_positions"].items()
+            }
+            data["started"] = {int(s): t for s, t in data["started"].items()}
+            data["settled"] = {int(s): t for s, t in data["settled"].items()}
+            for key in (
+                "centroid_offset",
+                "com_offset",
+                "com_observer",
+                "com_velocity",
+                "contact_to_com",
+            ):
+                if data[key] is not None:
+                    data[key] = tuple(data[key])
+            return Estimates(**data)
+        data["lost_neighbours"] = tuple(data.get("lost_neighbours", ()))
+        return Status(**data)
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise DecodeError(f"{kind.__name__.lower()}: malformed ({err})") from None

@@ -23,6 +23,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from heft.network_cli import add_commands as add_network_commands
 from simulator.scenario import Scenario, ScenarioError, load_scenario, scenario_to_toml
 
 if TYPE_CHECKING:
@@ -121,8 +122,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"{PROG}: running {scenario.name!r} ({scenario.n} robots)", file=sys.stderr)
         progress = _progress_printer(time.perf_counter(), sys.stderr)
-    every = max(1, round(PROGRESS_EVERY_S / scenario.period_s))
-    outcome = run_inprocess(scenario, progress=progress, progress_every=every)
+    if args.transport == "zenoh":
+        outcome = _run_zenoh(args, scenario)
+    else:
+        every = max(1, round(PROGRESS_EVERY_S / scenario.period_s))
+        outcome = run_inprocess(scenario, progress=progress, progress_every=every)
     print(format_table(outcome))
     if args.out is not None:
         text = json.dumps(results_dict(outcome), indent=2, allow_nan=False) + "\n"
@@ -132,13 +136,50 @@ def cmd_run(args: argparse.Namespace) -> int:
         for path in _write_plots(outcome, Path(args.plot)):
             print(f"wrote plot {path}")
     if not outcome.converged:
-        print(
-            f"{PROG}: not converged: the team did not finish every step within"
-            f" run.max_time_s = {scenario.run.max_time_s:g} s of simulated time",
-            file=sys.stderr,
-        )
+        lost = outcome.transport.get("lost")
+        if outcome.transport.get("halted"):
+            print(
+                f"{PROG}: not converged: the team stopped because robot(s) {lost} were lost"
+                " (n is fixed: estimates without a robot would be wrong)",
+                file=sys.stderr,
+            )
+        else:
+            print(
+                f"{PROG}: not converged: the team did not finish every step within"
+                f" run.max_time_s = {scenario.run.max_time_s:g} s of simulated time",
+                file=sys.stderr,
+            )
         return 1
     return 0
+
+
+def _run_zenoh(args: argparse.Namespace, scenario: Scenario) -> RunOutcome:
+    from agent.config import ConfigError
+    from agent.faults import FaultSettings
+    from heft.launcher import run_zenoh
+
+    faults = FaultSettings(drop=args.drop, delay_s=args.delay_ms / 1000.0, seed=scenario.run.seed)
+    try:
+        faults.validate("--drop/--delay-ms")
+    except ConfigError as err:
+        raise UsageError(str(err)) from None
+
+    def report(time_s: float, phases: str) -> None:
+        if not args.quiet:
+            print(
+                f"{PROG}: t = {time_s:6.1f} s simulated, phases so far: {phases}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    stream = sys.stderr if not args.quiet else open(os.devnull, "w")  # noqa: SIM115
+    try:
+        return run_zenoh(
+            scenario, clock=args.clock, faults=faults, progress=report, log_stream=stream
+        )
+    finally:
+        if stream is not sys.stderr:
+            stream.close()
 
 
 def _write_plots(outcome: RunOutcome, directory: Path) -> list[Path]:
@@ -226,16 +267,54 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
         help="simulate a scenario and print the estimates against the truth",
         formatter_class=_Formatter,
         description=(
-            "Simulate SCENARIO in this process: one agent per robot, the in-memory transport\n"
-            "and a pymunk plant, until every robot has finished the paper's seven steps or\n"
-            "the scenario's run.max_time_s. Prints a table of every robot's estimates (m, J,\n"
-            "contact-to-COM offset) and their errors against the ground truth, and the time\n"
-            "each step ended.\n\n"
-            "Exit status: 0 converged, 1 not converged in time, 2 bad scenario or arguments."
+            "Simulate SCENARIO: one agent per robot and a pymunk plant, until every robot has\n"
+            "finished the paper's seven steps or the scenario's run.max_time_s. By default in\n"
+            "this process over the in-memory transport; with --transport zenoh as separate\n"
+            "processes (a Zenoh router, the plant, one agent per robot) on 127.0.0.1. Prints\n"
+            "a table of every robot's estimates (m, J, contact-to-COM offset) and their errors\n"
+            "against the ground truth, and when each step started and ended.\n\n"
+            "Exit status: 0 converged, 1 not converged (out of time, or a robot was lost),\n"
+            "2 bad scenario or arguments, 130 interrupted."
         ),
-        epilog="example: heft run simulator/scenarios/paper.toml --out results.json --plot plots",
+        epilog=(
+            "examples:\n"
+            "  heft run simulator/scenarios/paper.toml --out results.json --plot plots\n"
+            "  heft run simulator/scenarios/paper.toml --transport zenoh --drop 0.1"
+        ),
     )
     parser.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
+    parser.add_argument(
+        "--transport",
+        choices=("inprocess", "zenoh"),
+        default="inprocess",
+        help="inprocess: one process; zenoh: one process per robot (default: inprocess)",
+    )
+    parser.add_argument(
+        "--clock",
+        choices=("lockstep", "realtime"),
+        default="lockstep",
+        help="with zenoh: lockstep (deterministic, faster than real time) or realtime"
+        " (the wall clock) (default: lockstep)",
+    )
+    parser.add_argument(
+        "--drop",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="with zenoh: probability that a message between agents is lost (default: 0)",
+    )
+    parser.add_argument(
+        "--delay-ms",
+        type=float,
+        default=0.0,
+        metavar="MS",
+        help="with zenoh: delay added to every message between agents (default: 0)",
+    )
+    _add_output_options(parser)
+    parser.set_defaults(handler=cmd_run)
+
+
+def _add_output_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out",
         metavar="FILE",
@@ -252,7 +331,6 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
         action="store_true",
         help=f"no progress lines on stderr (default: one every {PROGRESS_EVERY_S:g} simulated s)",
     )
-    parser.set_defaults(handler=cmd_run)
 
 
 def _add_scenario(commands: argparse._SubParsersAction) -> None:
@@ -336,6 +414,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(commands)
     _add_scenario(commands)
     _add_bench(commands)
+    add_network_commands(commands, _Formatter, _add_output_options)
     return parser
 
 

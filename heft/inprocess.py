@@ -44,6 +44,8 @@ class RunOutcome:
     final: Sample
     history: list[Sample] = field(default_factory=list)
     phase_ticks: dict[str, int] = field(default_factory=dict)
+    transport: dict = field(default_factory=dict)
+    """What the transport reported (the Zenoh run: the plant's counters and latencies)."""
 
     @property
     def sim_time_s(self) -> float:
@@ -104,8 +106,8 @@ def run_inprocess(
         phase_ticks.setdefault(PHASES[team_phase], k)
         if progress is not None and k % progress_every == 0:
             progress(k, k * scenario.period_s, agents)
-        if team_phase == DONE and not converged:
-            converged = True
+        if team_phase >= DONE and last > k + 1:
+            converged = all(a.phase == DONE for a in agents)
             last = k + 1  # one more tick, for estimates of this instant
         # The plant has not moved since it was sampled: its truth is that of tick k.
         pending = plant.truth() if (k % record_every == 0 or k >= last - 1) else None

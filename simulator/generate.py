@@ -259,6 +259,29 @@ def generate_scenario(seed: int) -> Scenario:
     return parse_scenario(data, source=f"generated-{seed}")
 
 
+def ring_scenario(n: int, *, name: str | None = None) -> Scenario:
+    """``n`` robots evenly spaced around a round 3 m load, talking in a ring (for benchmarks
+    that grow the team): a 32-sided polygon of 10 kg, moment implied, COM off-centre."""
+    if not 3 <= n <= 32 or 32 % n:
+        raise ValueError(f"ring_scenario needs n dividing 32 with n >= 3, got {n}")
+    sides = 32
+    polygon = [
+        (
+            round(1.5 * math.cos(2 * math.pi * k / sides), 9),
+            round(1.5 * math.sin(2 * math.pi * k / sides), 9),
+        )
+        for k in range(sides)
+    ]
+    data = {
+        "name": name or f"ring-{n}",
+        "description": f"{n} robots around a round load, ring graph",
+        "body": {"polygon": polygon, "mass": 10.0, "com": [0.2, -0.1]},
+        "contacts": {"points": [polygon[k * sides // n] for k in range(n)]},
+        "graph": {"edges": [[i, i % n + 1] for i in range(1, n + 1)]},
+    }
+    return parse_scenario(data, data["name"])
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m simulator.generate SEED [-o FILE]``: write a generated scenario as TOML."""
     parser = argparse.ArgumentParser(
