@@ -39,12 +39,13 @@ from collections.abc import Iterable
 from agent.config import AgentConfig
 from agent.coordination import PhaseBarrier
 from agent.estimation.angular_velocity import angular_velocity
-from agent.estimation.centroid import centroid_step
+from agent.estimation.centroid import centroid_term
 from agent.estimation.com_observer import ComObserver
 from agent.estimation.com_regression import ComRegression
 from agent.estimation.com_velocity import com_velocity
-from agent.estimation.consensus import average_consensus_step, metropolis_weight
+from agent.estimation.consensus import consensus_term, metropolis_weight
 from agent.estimation.excitation import kick_force, spin_up_force
+from agent.estimation.flows import EdgeFlows
 from agent.estimation.geometry import Vec2, rotate
 from agent.estimation.inertia import InertiaEstimator, inertia_force
 from agent.estimation.mass import MassEstimator
@@ -103,7 +104,8 @@ class Agent:
         self.zdot: dict[int, Vec2] = {}
         self.centroid: Vec2 = (0.0, 0.0)
         self.spread = 0.0
-        self._spread_input = 0.0
+        self.flows = EdgeFlows(self.neighbours)
+        self._fresh: set[int] = set()
         self.spin_sign = 0.0
         self.inertia: InertiaEstimator | None = None
         self.inertia_gain = 0.0
@@ -114,6 +116,8 @@ class Agent:
         self.push: Vec2 = (0.0, 0.0)
         self.com: ComRegression | None = None
         self.push_angle = 0.0
+        self._measured: int | None = None
+        """The last instant whose ω was measured (Steps 4–7 use only those)."""
         """The load's rotation angle at the push phase's first instant (Step 5's reference)."""
         self.observer: ComObserver | None = None
         self.mass_estimator: MassEstimator | None = None
@@ -142,6 +146,7 @@ class Agent:
             latest = self._latest.get(s.sender)
             if latest is None or s.tick > latest.tick:
                 self._latest[s.sender] = s
+                self._fresh.add(s.sender)
         if k >= 1:
             self._estimate(k - 1)
         if self.barrier.step(k, self._ready(k), self._latest.values()):
@@ -157,6 +162,7 @@ class Agent:
             phase=self.barrier.phase,
             ready=self.barrier.ready,
             switch_at=self.barrier.switch_at,
+            flows=tuple((j, *f) for j, f in self.flows.flows.items()),
         )
         self._forget(k - HISTORY_TICKS)
         return Command(self.robot, k, force), share
@@ -198,8 +204,8 @@ class Agent:
         self.angle += turn
         self._angle_at[e] = self.angle
         self._centroid_and_spread(turn)
-        self._track_settling(e, ref)
-        self._phase_estimates(e, t)
+        self._track_settling(e)
+        self._phase_estimates(e, measured=ref is not None)
 
     def relative_position(self, j: int) -> Vec2 | None:
         """``z_ij`` at the current estimation instant (turned forward if its sample is stale)."""
@@ -218,38 +224,47 @@ class Agent:
         return self.angle - angle
 
     def _centroid_and_spread(self, turn: float) -> None:
-        # Step 2 (Aragues et al.), in W at the current instant; and eq. (16) for w.
-        x = rotate(self.centroid, turn)
-        terms = []
-        spreads = []
+        """Step 2 (Aragues et al.) and eq. (16) for ``w``, in flow form, in ``W`` now:
+        ``x_i = −Σ_j F_ij`` and ``ξ_i = ‖x_i‖² − Σ_j F^s_ij``."""
+        flows = self.flows
+        flows.turn(turn)
+        for j in self._fresh:
+            s = self._latest[j]
+            for k, fx, fy, fs in s.flows:
+                if k == self.robot:
+                    vx, vy = rotate((fx, fy), self._turned_since(s.tick - 1))
+                    flows.adopt(j, (vx, vy, fs))
+        self._fresh.clear()
+        fx, fy, fs = flows.outflow()
+        x = (-fx, -fy)
+        xi = x[0] ** 2 + x[1] ** 2 - fs
         for j in self.neighbours:
             s = self._latest.get(j)
             if s is None:
                 continue
             a = metropolis_weight(self.degree, s.degree)
-            spreads.append((a, s.spread))
-            if s.centroid is None:
-                continue
-            x_j = rotate(s.centroid, self._turned_since(s.tick - 1))
-            z = self.relative_position(j) or (0.0, 0.0)
-            terms.append((a, x_j, z))
-        self.centroid = centroid_step(x, terms)
-        r = self.centroid[0] ** 2 + self.centroid[1] ** 2
-        self.spread = average_consensus_step(self.spread, spreads, r - self._spread_input)
-        self._spread_input = r
+            dx = dy = 0.0
+            if s.centroid is not None:
+                x_j = rotate(s.centroid, self._turned_since(s.tick - 1))
+                dx, dy = centroid_term(a, x, x_j, self.relative_position(j) or (0.0, 0.0))
+            flows.push(j, dx, dy, consensus_term(a, xi, s.spread))
+        fx, fy, fs = flows.outflow()
+        self.centroid = (-fx, -fy)
+        self.spread = fx * fx + fy * fy - fs
 
-    def _track_settling(self, e: int, ref: int | None) -> None:
+    def _track_settling(self, e: int) -> None:
         distances = [self.edges[j].distance for j in self.neighbours]
         if None in distances:
             return
         self.settle[1].update(distances, e)
-        if ref is None:
+        # z_i in the frame of the longest edge (always the same one): constant once converged.
+        longest = max(self.neighbours, key=lambda j: self.edges[j].distance)
+        z = self.relative_position(longest)
+        if z is None:
             return
-        z = self.relative_position(ref)
         d = math.hypot(*z)
         u = (z[0] / d, z[1] / d)
         x = self.centroid
-        # z_i in the frame of the reference edge: constant once converged.
         self.settle[2].update((x[0] * u[0] + x[1] * u[1], u[0] * x[1] - u[1] * x[0]), e)
         self.settle["spread"].update((self.spread,), e)
 
@@ -260,37 +275,41 @@ class Agent:
                 phase = p
         return phase
 
-    def _phase_estimates(self, e: int, t: float) -> None:
-        if self.omega is None:
+    def _phase_estimates(self, e: int, measured: bool) -> None:
+        """Steps 4–7. They use only instants whose ω was measured at that instant (not carried
+        over because every neighbour's message was lost); the interval since the previous such
+        instant is used whole."""
+        if self.omega is None or not measured:
             return
         omega = self.omega
+        prev, self._measured = self._measured, e
+        span = (e - prev) * self.dt if prev is not None else self.dt
         k_inertia = self.phase_start.get(INERTIA)
-        if (
-            self.inertia is not None
-            and k_inertia is not None
-            and (e == k_inertia or self._phase_of_tick(e - 1) == INERTIA)
-        ):
-            torque = self._inertia_torque.get(e - 1, 0.0) if e > k_inertia else 0.0
-            self.inertia.update(omega, self.dt, torque)
-            moment = self.inertia.moment
-            if moment is not None:
-                self.settle[4].update((moment,), e)
+        if self.inertia is not None and k_inertia is not None and e >= k_inertia:
+            if not self.inertia.regression.started:
+                self.inertia.update(omega, span, 0.0)  # starts the filters
+            elif prev >= k_inertia and self._phase_of_tick(e - 1) == INERTIA:
+                torques = [self._inertia_torque.get(t, 0.0) for t in range(prev, e)]
+                self.inertia.update(omega, span, sum(torques) / len(torques))
+                moment = self.inertia.moment
+                if moment is not None:
+                    self.settle[4].update((moment,), e)
         k_push = self.phase_start.get(PUSH)
         if self.com is None or k_push is None or e < k_push:
             return
-        # The regressions hold only while the common force acts: over [t_{e-1}, t_e].
-        pushing = e == k_push or self._phase_of_tick(e - 1) == PUSH
-        if e == k_push:
+        # The regressions hold only while the common force acts, over the whole interval.
+        pushing = prev is not None and prev >= k_push and self._phase_of_tick(e - 1) == PUSH
+        if not self.com.regression.started:
             self.push_angle = self.angle
-        alpha = self.angle - self.push_angle
-        if e == k_push:
             self.observer = ComObserver(
                 self.n, self.moment_used, self.push, self.tuning.observer_gain, omega
             )
-        elif pushing:
-            self.observer.update(omega, self.dt)
+            self.com.update(omega, 0.0, span)  # starts the filters
+            return
+        alpha = self.angle - self.push_angle
         if pushing:
-            self.com.update(omega, alpha, self.dt)
+            self.observer.update(omega, span)
+            self.com.update(omega, alpha, span)
         ref_offset = self.com.reference_offset
         if ref_offset is None:
             return
@@ -312,7 +331,7 @@ class Agent:
             )
             self.started[6] = e
             self.started[7] = e
-        self.mass_estimator.update(self.com_velocity, self.dt)
+        self.mass_estimator.update(self.com_velocity, span)
         mass = self.mass_estimator.mass
         if mass is not None:
             self.settle[7].update((mass,), e)
@@ -370,7 +389,7 @@ class Agent:
             return spin_up_force(self.tuning.spin_gain, self.tuning.spin_speed, self.zdot.values())
         if phase == INERTIA:
             # Speed the turn up until |ω| reaches the limit, then brake down to half of it.
-            speed = abs(self.omega or 0.0)
+            speed = abs(self._omega_now())
             if speed >= self.tuning.inertia_max_omega:
                 self.inertia_direction = -1.0
             elif speed <= 0.5 * self.tuning.inertia_max_omega:
@@ -383,6 +402,17 @@ class Agent:
         if phase == PUSH:
             return self.push
         return (0.0, 0.0)
+
+    def _omega_now(self) -> float:
+        """ω at the current instant: measured, or — when every neighbour's message of this
+        instant was lost — predicted from the last measurement with the torque the team applied
+        since (Step 4) and ``Ĵ``, so that every robot takes the same decisions."""
+        omega = self.omega or 0.0
+        moment = self.inertia.moment if self.inertia is not None else None
+        if self._measured is None or self._measured >= self.instant or moment is None:
+            return omega
+        impulse = sum(self._inertia_torque.get(t, 0.0) for t in range(self._measured, self.instant))
+        return omega + impulse * self.dt / moment
 
     def _forget(self, before: int) -> None:
         self._own_velocity.pop(before, None)

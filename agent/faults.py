@@ -74,3 +74,28 @@ class LinkFaults:
 
     def forget(self, before_tick: int) -> None:
         self.dropped = {(s, t) for s, t in self.dropped if t >= before_tick}
+
+
+class FaultyTransport:
+    """Any :class:`~agent.transport.Transport`, with faults applied to what each robot
+    receives (in-process runs and tests; the Zenoh transport applies them itself)."""
+
+    def __init__(self, inner, settings: FaultSettings, clock=None):
+        import time
+
+        self.inner = inner
+        self.settings = settings
+        self._clock = clock or time.monotonic
+        self._faults: dict[int, LinkFaults] = {}
+
+    def send(self, share: Share) -> None:
+        self.inner.send(share)
+
+    def receive(self, robot: int) -> list[Share]:
+        faults = self._faults.get(robot)
+        if faults is None:
+            faults = self._faults[robot] = LinkFaults(self.settings, robot)
+        now = self._clock()
+        for share in self.inner.receive(robot):
+            faults.offer(share, now)
+        return faults.release(now)

@@ -56,6 +56,8 @@ class Share:
     - ``degree``: the sender's number of neighbours (Metropolis consensus weights).
     - ``centroid``: the sender's centroid iterate ``x_i`` (Aragues et al. [10]) or ``None``.
     - ``spread``: the sender's average-consensus state ``ξ_i`` for ``w = Σ‖z_i‖²`` (eq. 16).
+    - ``flows``: ``(j, F_x, F_y, F_s)`` per neighbour ``j``: the sender's outflows of both
+      iterations on edge ``(sender, j)`` (see :mod:`agent.estimation.flows`).
     - ``phase``, ``ready``, ``switch_at``: the team's phase barrier (see
       :mod:`agent.coordination`): the sender's phase, the bitmask of robots known to be ready
       to leave it, and the agreed tick of the switch (``-1`` while none is agreed).
@@ -70,6 +72,7 @@ class Share:
     phase: int = 0
     ready: int = 0
     switch_at: int = -1
+    flows: tuple[tuple[int, float, float, float], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,7 +188,8 @@ class Status:
 # kind byte → (type, struct of the body)
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct("<Hq2dHB2ddBQq")
+_SHARE = _struct.Struct("<Hq2dHB2ddBQqB")
+_FLOW = _struct.Struct("<H3d")
 _CLOCK = _struct.Struct("<qd")
 _KIND = {Measurement: 1, Command: 2, Share: 3, Clock: 4, Estimates: 5, Status: 6}
 _JSON_KINDS = {7: "truth", 8: "control", 9: "plant_status"}
@@ -209,7 +213,7 @@ def encode(message: object) -> bytes:
     if kind == 3:
         has = m.centroid is not None
         cx, cy = m.centroid if has else (0.0, 0.0)
-        return head + _SHARE.pack(
+        fixed = _SHARE.pack(
             m.sender,
             m.tick,
             *m.velocity,
@@ -221,7 +225,9 @@ def encode(message: object) -> bytes:
             m.phase,
             m.ready,
             m.switch_at,
+            len(m.flows),
         )
+        return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
     if kind == 4:
         return head + _CLOCK.pack(m.tick, m.time_s)
     body = {k: getattr(m, k) for k in m.__dataclass_fields__}
@@ -291,11 +297,28 @@ def decode(kind: type | str, payload: bytes):
         r, t, fx, fy = _unpack(_COMMAND, body, "command")
         return Command(r, t, (fx, fy))
     if kind is Share:
-        s, t, vx, vy, deg, has, cx, cy, spread, phase, ready, switch_at = _unpack(
-            _SHARE, body, "share"
+        fixed = body[: _SHARE.size]
+        s, t, vx, vy, deg, has, cx, cy, spread, phase, ready, switch_at, count = _unpack(
+            _SHARE, fixed, "share"
+        )
+        rest = body[_SHARE.size :]
+        if len(rest) != count * _FLOW.size:
+            raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
+        flows = tuple(
+            _unpack(_FLOW, rest[i : i + _FLOW.size], "share flow")
+            for i in range(0, len(rest), _FLOW.size)
         )
         return Share(
-            s, t, (vx, vy), deg, (cx, cy) if has else None, spread, phase, ready, switch_at
+            s,
+            t,
+            (vx, vy),
+            deg,
+            (cx, cy) if has else None,
+            spread,
+            phase,
+            ready,
+            switch_at,
+            flows,
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))

@@ -39,6 +39,8 @@ class ZenohTransport:
         self.neighbours = frozenset(neighbours)
         self.faults = LinkFaults(faults or FaultSettings(), robot)
         self.decode_errors = 0
+        self.samples = 0
+        """Samples received, before decoding (only ever from the neighbours' keys)."""
         self.foreign = 0
         """Messages that decoded but did not come from a neighbour (never delivered)."""
         self._clock = clock
@@ -51,6 +53,7 @@ class ZenohTransport:
         ]
 
     def _on_sample(self, sample) -> None:
+        self.samples += 1
         self._incoming.append((self._clock(), sample.payload.to_bytes()))
         self._wake()
 

@@ -126,7 +126,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         outcome = _run_zenoh(args, scenario)
     else:
         every = max(1, round(PROGRESS_EVERY_S / scenario.period_s))
-        outcome = run_inprocess(scenario, progress=progress, progress_every=every)
+        transport = None
+        faults = _faults(args, scenario)
+        if faults.active:
+            from agent.faults import FaultyTransport
+            from agent.transport import InMemoryTransport
+
+            transport = FaultyTransport(InMemoryTransport(scenario.n, scenario.edges), faults)
+        outcome = run_inprocess(
+            scenario, transport=transport, progress=progress, progress_every=every
+        )
     print(format_table(outcome))
     if args.out is not None:
         text = json.dumps(results_dict(outcome), indent=2, allow_nan=False) + "\n"
@@ -153,16 +162,22 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_zenoh(args: argparse.Namespace, scenario: Scenario) -> RunOutcome:
+def _faults(args: argparse.Namespace, scenario: Scenario):
     from agent.config import ConfigError
     from agent.faults import FaultSettings
-    from heft.launcher import run_zenoh
 
     faults = FaultSettings(drop=args.drop, delay_s=args.delay_ms / 1000.0, seed=scenario.run.seed)
     try:
         faults.validate("--drop/--delay-ms")
     except ConfigError as err:
         raise UsageError(str(err)) from None
+    return faults
+
+
+def _run_zenoh(args: argparse.Namespace, scenario: Scenario) -> RunOutcome:
+    from heft.launcher import run_zenoh
+
+    faults = _faults(args, scenario)
 
     def report(time_s: float, phases: str) -> None:
         if not args.quiet:
@@ -301,14 +316,14 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
         type=float,
         default=0.0,
         metavar="P",
-        help="with zenoh: probability that a message between agents is lost (default: 0)",
+        help="probability that a message between agents is lost (default: 0)",
     )
     parser.add_argument(
         "--delay-ms",
         type=float,
         default=0.0,
         metavar="MS",
-        help="with zenoh: delay added to every message between agents (default: 0)",
+        help="delay added to every message between agents, on the wall clock (default: 0)",
     )
     _add_output_options(parser)
     parser.set_defaults(handler=cmd_run)

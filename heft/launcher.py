@@ -126,6 +126,8 @@ class Child:
         """Wait up to ``grace_s`` for it to exit, then SIGTERM, then SIGKILL."""
         for sig in (None, signal.SIGTERM, signal.SIGKILL):
             if sig is not None and self.process.poll() is None:
+                if sig == signal.SIGTERM:
+                    self.process.send_signal(signal.SIGCONT)  # a stopped process can't exit
                 self.process.send_signal(sig)
             try:
                 self.process.wait(timeout=grace_s)
@@ -353,6 +355,7 @@ def run_zenoh(
         finally:
             for child in reversed(children):
                 if child.process.poll() is None:
+                    child.process.send_signal(signal.SIGCONT)
                     child.process.send_signal(signal.SIGTERM)
             for child in reversed(children):
                 child.stop(grace_s=STOP_GRACE_S)

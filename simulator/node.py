@@ -125,10 +125,12 @@ class PlantNode:
             except DecodeError:
                 return
             if "DELETE" in event[2].upper():
+                if self.stop.is_set():
+                    log.info("robot %d: agent left (the run is over)", robot)
+                    self.alive.discard(robot)
+                    return
                 if robot not in self.lost:
-                    level = logging.INFO if self.stop.is_set() else logging.WARNING
-                    log.log(
-                        level,
+                    log.warning(
                         "robot %d: agent gone at t = %.2f s; it pushes no more",
                         robot,
                         self.plant.time_s,

@@ -730,49 +730,49 @@ def test_com_observer_coordinates_for_a_rotated_force():
 @pytest.mark.parametrize("window", [1, 5, 40])
 def test_settle_constant_sequence(window):
     det = SettleDetector(window, 0.01)
-    # `window` step-to-step changes need `window + 1` values.
+    # `window` quiet updates after the first value.
     for tick in range(window):
         assert det.update((2.0, -1.0), tick) is False
     assert det.update((2.0, -1.0), window) is True
     assert det.first_settled == window
 
 
-def test_settle_never_with_large_changes():
+def test_settle_ignores_jitter_but_not_drift():
     window, tol = 10, 0.05
+    # Jitter: every step moves by 0.9·tol·size, but it goes nowhere: settles.
     det = SettleDetector(window, tol)
     base = 3.0
-    step = 1.5 * tol * (base + 1.0) / window  # above tol·size/window for either value
-    for tick in range(2000):
-        value = base + (step if tick % 2 else 0.0)
-        assert det.update((value,), tick) is False
-    assert det.first_settled is None
-    # Growth: each change ρ·x with ρ > tol(1+ρ)/window.
+    for tick in range(3 * window):
+        det.update((base + (0.9 * tol * base if tick % 2 else 0.0),), tick)
+    assert det.settled
+    # Drift: each step small (tol·size/window·2), but over a window it moves 2·tol: never.
     det = SettleDetector(window, tol)
-    x, rho = 1.0, 2.0 * tol / window
+    x = 1.0
     for tick in range(500):
-        x *= 1.0 + rho
+        x *= 1.0 + 2.0 * tol / window
         assert det.update((x, 0.0), tick) is False
+    assert det.first_settled is None
+    # A single jump larger than tol·size resets the streak.
+    det = SettleDetector(window, tol)
+    for tick in range(3 * window):
+        det.update((1.0,), tick)
+    assert det.settled
+    det.update((1.0 + 2 * tol,), 100)
+    assert not det.settled
 
 
-def test_settle_small_changes_and_first_tick():
+def test_settle_first_tick_and_reset():
     window, tol = 4, 0.1
     det = SettleDetector(window, tol)
-    value = 10.0
     ticks = list(range(100, 160, 3))
     for idx, tick in enumerate(ticks[:5]):  # big changes: not settled
-        det.update((value + 5.0 * idx,), tick)
+        det.update((10.0 + 5.0 * idx,), tick)
     assert not det.settled
-    value = 10.0 + 5.0 * 4
-    for idx, tick in enumerate(ticks[5:]):
-        # Changes of half the allowed size per update (the first one measured from the last
-        # big value) keep it settling: settled after `window` of them.
-        value += 0.5 * tol * value / window
-        det.update((value,), tick)
-        if idx < window - 1:
-            assert det.first_settled is None
-    assert det.first_settled == ticks[5 + window - 1]
+    for tick in ticks[5:]:
+        det.update((30.0,), tick)
+    assert det.first_settled == ticks[4 + 2 * window]  # the big values leave the window first
     first = det.first_settled
-    det.update((value * 2,), 999)  # a jump: unsettled again, first tick kept
+    det.update((60.0,), 999)  # a jump: unsettled again, first tick kept
     assert not det.settled and det.first_settled == first
     det.reset()
     assert det.first_settled is None and not det.settled and det.streak == 0
@@ -780,14 +780,14 @@ def test_settle_small_changes_and_first_tick():
 
 def test_settle_uses_floor_near_zero():
     window, tol, floor = 5, 0.1, 1e-3
+    limit = tol * floor
     det = SettleDetector(window, tol, floor)
-    limit = tol * floor / window
-    for tick in range(20):  # around zero: changes of 0.9·limit are tolerated
+    for tick in range(20):  # around zero: steps of 0.9·tol·floor are tolerated
         det.update((0.45 * limit * (-1) ** tick,), tick)
     assert det.settled
     det = SettleDetector(window, tol, floor)
     for tick in range(20):
-        det.update((0.55 * limit * (-1) ** tick,), tick)  # changes of 1.1·limit
+        det.update((0.55 * limit * (-1) ** tick,), tick)  # steps of 1.1·tol·floor
     assert not det.settled
 
 

@@ -220,3 +220,16 @@ def test_an_agent_rejects_unusable_shares() -> None:
     command, _ = agent.step(Measurement(1, 1, 0.01, (0.0, 0.0), (0.0, 0.0)), bad)
     assert agent.rejected == len(bad)
     assert all(math.isfinite(f) for f in command.force)
+
+
+@pytest.mark.parametrize("which", ["paper", 0, 5, 11])
+def test_ten_percent_of_messages_lost_still_converges(which) -> None:
+    """Lost messages break the zero-sum invariant of plain consensus; flow updating keeps it."""
+    from agent.faults import FaultSettings, FaultyTransport
+
+    scenario = load_scenario(PAPER) if which == "paper" else generate_scenario(which)
+    lossy = FaultyTransport(
+        InMemoryTransport(scenario.n, scenario.edges), FaultSettings(drop=0.1, seed=3)
+    )
+    outcome = run_inprocess(scenario, transport=lossy, record_every=1000)
+    assert_within(outcome, rel=0.005, metres=0.005)

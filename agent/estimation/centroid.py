@@ -12,7 +12,8 @@ The ``z_ij`` turn with the load, so the iteration must run in a frame fixed to t
 Step 2). Here every vector stays in the world frame ``W`` at the agent's current instant: before
 each update, the agent turns its own previous iterate and each neighbour's (stamped with the
 instant it refers to) by the load's rotation since then. That is the load-frame iteration
-written in ``W``, and it needs no agreement on a reference instant.
+written in ``W``, and it needs no agreement on a reference instant. The agent runs it in flow
+form (:mod:`agent.estimation.flows`), which keeps ``Σ x_i = 0`` when messages are lost.
 """
 
 from __future__ import annotations
@@ -22,11 +23,16 @@ from collections.abc import Iterable
 from agent.estimation.geometry import Vec2
 
 
+def centroid_term(a: float, x_i: Vec2, x_j: Vec2, z_ij: Vec2) -> Vec2:
+    """Edge ``ij``'s term of the update, ``a_ij (x_j − x_i + z_ij)``."""
+    return (a * (x_j[0] - x_i[0] + z_ij[0]), a * (x_j[1] - x_i[1] + z_ij[1]))
+
+
 def centroid_step(x_i: Vec2, neighbours: Iterable[tuple[float, Vec2, Vec2]]) -> Vec2:
     """One update of ``x_i`` from ``(a_ij, x_j, z_ij)`` triples, all in the same frame."""
     x, y = x_i
-    dx = dy = 0.0
     for a, x_j, z_ij in neighbours:
-        dx += a * (x_j[0] - x + z_ij[0])
-        dy += a * (x_j[1] - y + z_ij[1])
-    return (x + dx, y + dy)
+        dx, dy = centroid_term(a, x_i, x_j, z_ij)
+        x += dx
+        y += dy
+    return (x, y)

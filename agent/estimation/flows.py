@@ -1,0 +1,59 @@
+"""Flow updating: consensus iterations that survive lost messages.
+
+Both of the team's iterations — the centroid offsets (Aragues et al. [10]) and the average
+consensus for ``w`` (eq. 16) — rest on a sum that must never change: ``Σ x_i = 0`` and
+``Σ ξ_i = Σ r_i``. When a message is lost, the two ends of an edge apply different updates and
+the sum drifts for good: every estimate is then off by the same constant.
+
+Written as *flows* on the edges (Jesus, Baquero & Almeida, "Fault-tolerant aggregation by flow
+updating", 2009), each robot keeps, for each neighbour ``j``, what has flowed from it to ``j``:
+``F_ij``. Its estimate is its own input minus its outflows, ``x_i = r_i − Σ_j F_ij``, and an
+update of the iteration is an update of the flows: ``F_ij ← F_ij − Δ_ij`` where ``Δ_ij`` is
+edge ``ij``'s term of the iteration. Each robot sends its flows to its neighbours, and on
+hearing from ``j`` takes ``F_ij = −F_ji``. The flows of an edge are then antisymmetric
+whatever was lost, so the sum holds: the iteration converges to the same point as without loss.
+Without loss the adopted flows equal one's own, and it is exactly the original iteration.
+
+Flows are ``(x, y, s)``: a 2-vector for the centroid (in ``W`` at the robot's current instant,
+turned with the load like the iterates) and a scalar for ``w``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from agent.estimation.geometry import rotate
+
+Flow = tuple[float, float, float]
+
+
+class EdgeFlows:
+    """One robot's outflows to each neighbour."""
+
+    def __init__(self, neighbours: Iterable[int]):
+        self.flows: dict[int, Flow] = {j: (0.0, 0.0, 0.0) for j in neighbours}
+
+    def turn(self, angle: float) -> None:
+        """Turn the vector parts with the load (they live in the co-rotating frame)."""
+        if angle:
+            for j, (x, y, s) in self.flows.items():
+                rx, ry = rotate((x, y), angle)
+                self.flows[j] = (rx, ry, s)
+
+    def adopt(self, j: int, theirs: Flow) -> None:
+        """``F_ij = −F_ji``, from ``j``'s latest message (its vector turned to our instant)."""
+        self.flows[j] = (-theirs[0], -theirs[1], -theirs[2])
+
+    def push(self, j: int, dx: float, dy: float, ds: float) -> None:
+        """``F_ij ← F_ij − Δ_ij``: move ``Δ_ij`` into this robot's estimate."""
+        x, y, s = self.flows[j]
+        self.flows[j] = (x - dx, y - dy, s - ds)
+
+    def outflow(self) -> Flow:
+        """``Σ_j F_ij``."""
+        fx = fy = fs = 0.0
+        for x, y, s in self.flows.values():
+            fx += x
+            fy += y
+            fs += s
+        return (fx, fy, fs)
