@@ -36,6 +36,7 @@ from simulator.scenario import Scenario, scenario_to_toml
 
 Progress = Callable[[float, str], None]
 STOP_GRACE_S = 5.0
+HALT_GRACE_S = 0.5
 
 
 def free_port() -> int:
@@ -157,6 +158,7 @@ class Collector:
         self.latest_tick = 0
         self._finished = False
         self.first_truth_at: float | None = None
+        self.halted_at = 0.0
         self.finished_at: float | None = None
         put = self.events.put
         self._subscribers = [
@@ -199,6 +201,8 @@ class Collector:
                 self._complete(truth.tick)
             else:
                 self.plant_status = decode("plant_status", payload)
+                if not self._finished:
+                    self.lost.update(self.plant_status.get("lost", []))
         except (DecodeError, TypeError, KeyError, ValueError) as err:
             self.decode_errors += 1
             if self.decode_errors <= 5:
@@ -206,19 +210,24 @@ class Collector:
 
     def _estimate(self, est: Estimates) -> None:
         if est.phase == "halted":
-            self.halted = True
+            self._halt()
         if est.phase == "done" and est.robot not in self.done_at:
             self.done_at[est.robot] = est.tick + 1
         self.estimates[est.tick][est.robot] = est
         self._complete(est.tick)
 
     def _status(self, status: Status) -> None:
+        self.lost.update(status.lost_neighbours)
         tick = self.phase_ticks.get(status.phase)
         if tick is None or status.tick < tick:
             self.phase_ticks[status.phase] = status.tick
-        self.lost.update(status.lost_neighbours)
         if status.phase == "halted":
+            self._halt()
+
+    def _halt(self) -> None:
+        if not self.halted:
             self.halted = True
+            self.halted_at = time.perf_counter()
 
     @property
     def done_instant(self) -> int | None:
@@ -245,9 +254,11 @@ class Collector:
 
     def finished(self) -> bool:
         done = self.done_instant
+        # After a halt, a moment more to hear who was lost (agents and plant report it).
+        halt_over = self.halted and time.perf_counter() - self.halted_at > HALT_GRACE_S
         self._finished = (
             self._finished
-            or self.halted
+            or halt_over
             or (done is not None and self.final is not None and self.final.truth.tick >= done)
         )
         if self._finished and self.finished_at is None:

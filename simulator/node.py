@@ -139,6 +139,7 @@ class PlantNode:
                 self.alive.discard(robot)
                 self.commands.pop(robot, None)
                 self.plant.command(robot, (0.0, 0.0))
+                self.publish_status()
             elif robot not in self.lost:
                 self.alive.add(robot)
 
