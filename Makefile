@@ -6,8 +6,8 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test lint bench clean
 
-demo: $(STAMP)  ## Run the paper's scenario: table of estimates vs truth, results JSON, plots.
-	$(BIN)/heft run simulator/scenarios/paper.toml --out out/paper-results.json --plot out/plots
+demo: $(STAMP)  ## The paper's scenario, 4 robot processes over Zenoh in real time: table, JSON, plots.
+	$(BIN)/heft demo --out out/paper-results.json --plot out/plots
 
 test: $(STAMP) lint  ## Lint, then run the whole test suite.
 	$(BIN)/python -m pytest -q
@@ -16,8 +16,9 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
-bench: $(STAMP)  ## Print accuracy, step durations and speed on the paper's scenario.
+bench: $(STAMP)  ## Accuracy, step durations and speed: in one process, then over Zenoh.
 	$(BIN)/heft bench
+	$(BIN)/heft bench --transport zenoh
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 is needed"'

@@ -204,7 +204,8 @@ class Agent:
         self.angle += turn
         self._angle_at[e] = self.angle
         self._centroid_and_spread(turn)
-        self._track_settling(e)
+        if self.barrier.phase == EXCITE:  # later, Steps 1-3 are done: nothing reads these
+            self._track_settling(e)
         self._phase_estimates(e, measured=ref is not None)
 
     def relative_position(self, j: int) -> Vec2 | None:
@@ -237,7 +238,8 @@ class Agent:
         self._fresh.clear()
         fx, fy, fs = flows.outflow()
         x = (-fx, -fy)
-        xi = x[0] ** 2 + x[1] ** 2 - fs
+        xi = x[0] * x[0] + x[1] * x[1] - fs
+        previous = self.instant - 1
         for j in self.neighbours:
             s = self._latest.get(j)
             if s is None:
@@ -245,10 +247,17 @@ class Agent:
             a = metropolis_weight(self.degree, s.degree)
             dx = dy = 0.0
             if s.centroid is not None:
-                x_j = rotate(s.centroid, self._turned_since(s.tick - 1))
+                # Usually one tick old: turned by this tick's turn, already applied to the flows.
+                if s.tick - 1 == previous:
+                    x_j = flows.turned(s.centroid)
+                else:
+                    x_j = rotate(s.centroid, self._turned_since(s.tick - 1))
                 dx, dy = centroid_term(a, x, x_j, self.relative_position(j) or (0.0, 0.0))
-            flows.push(j, dx, dy, consensus_term(a, xi, s.spread))
-        fx, fy, fs = flows.outflow()
+            ds = consensus_term(a, xi, s.spread)
+            flows.push(j, dx, dy, ds)
+            fx -= dx
+            fy -= dy
+            fs -= ds
         self.centroid = (-fx, -fy)
         self.spread = fx * fx + fy * fy - fs
 

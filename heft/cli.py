@@ -230,6 +230,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     if args.generated is not None:
         return _bench_generated(args.generated)
+    if args.transport == "zenoh":
+        return _bench_zenoh(args.sizes)
     if args.repeat < 1:
         raise UsageError(f"--repeat must be at least 1, got {args.repeat}")
     scenario = _load(args.scenario)
@@ -245,6 +247,30 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     report = run_benchmark(scenario, args.repeat, source=args.scenario, on_run=on_run)
     print(format_report(report))
+    return 0
+
+
+def _bench_zenoh(sizes: str) -> int:
+    from heft.benchmark import format_zenoh_report, run_zenoh_benchmark
+
+    try:
+        counts = [int(s) for s in sizes.split(",")]
+    except ValueError:
+        raise UsageError(f"--sizes: expected numbers like 4,8,16, got {sizes!r}") from None
+    for n in counts:
+        if n < 3 or 32 % n:
+            raise UsageError(f"--sizes: a ring team needs n >= 3 dividing 32, got {n}")
+
+    def on_run(what: str, outcome: RunOutcome) -> None:
+        state = "converged" if outcome.converged else "NOT converged"
+        print(
+            f"{PROG}: {what}: {state}, {outcome.sim_time_s:.2f} s simulated in"
+            f" {outcome.wall_s:.2f} s wall",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    print(format_zenoh_report(run_zenoh_benchmark(counts, on_run)))
     return 0
 
 
@@ -402,6 +428,19 @@ def _add_bench(commands: argparse._SubParsersAction) -> None:
         type=int,
         default=DEFAULT_REPEAT,
         help=f"number of runs (default: {DEFAULT_REPEAT})",
+    )
+    parser.add_argument(
+        "--transport",
+        choices=("inprocess", "zenoh"),
+        default="inprocess",
+        help="zenoh: instead, one process per robot: lockstep speed of ring teams (--sizes),"
+        " then the paper's scenario in real time: command latency p50/p99, CPU per agent",
+    )
+    parser.add_argument(
+        "--sizes",
+        default="4,8,16",
+        metavar="N,N,...",
+        help="with --transport zenoh: ring team sizes (default: 4,8,16)",
     )
     parser.add_argument(
         "--generated",

@@ -20,9 +20,8 @@ turned with the load like the iterates) and a scalar for ``w``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
-
-from agent.estimation.geometry import rotate
 
 Flow = tuple[float, float, float]
 
@@ -32,13 +31,19 @@ class EdgeFlows:
 
     def __init__(self, neighbours: Iterable[int]):
         self.flows: dict[int, Flow] = {j: (0.0, 0.0, 0.0) for j in neighbours}
+        self._c, self._s = 1.0, 0.0
 
     def turn(self, angle: float) -> None:
         """Turn the vector parts with the load (they live in the co-rotating frame)."""
+        self._c, self._s = c, s = math.cos(angle), math.sin(angle)
         if angle:
-            for j, (x, y, s) in self.flows.items():
-                rx, ry = rotate((x, y), angle)
-                self.flows[j] = (rx, ry, s)
+            for j, (x, y, f) in self.flows.items():
+                self.flows[j] = (c * x - s * y, s * x + c * y, f)
+
+    def turned(self, v: tuple[float, float]) -> tuple[float, float]:
+        """``v`` turned by the angle of the last :meth:`turn`."""
+        c, s = self._c, self._s
+        return (c * v[0] - s * v[1], s * v[0] + c * v[1])
 
     def adopt(self, j: int, theirs: Flow) -> None:
         """``F_ij = −F_ji``, from ``j``'s latest message (its vector turned to our instant)."""

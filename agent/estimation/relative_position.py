@@ -40,6 +40,7 @@ class RelativePosition:
             filter_gain, outputs=2, params=1, forgetting=forgetting
         )
         self.learning = True
+        self._theta: float | None = None
         """While ``False`` the distance is frozen and only the direction is tracked."""
         self.min_speed = min_speed
         self.sigma = 1.0
@@ -76,16 +77,21 @@ class RelativePosition:
                 self.regression.update(
                     ty, ((h * (self.zdot[0] + zdot[0]),), (h * (self.zdot[1] + zdot[1]),)), dt
                 )
+                self._theta = self._solve()
         self.direction = ty
         self.zdot = zdot
         self.time = time_s
 
-    @property
-    def theta(self) -> float | None:
+    def _solve(self) -> float | None:
         est = self.regression.estimate
         if est is None or est[0] == 0.0:
             return None
         return est[0]
+
+    @property
+    def theta(self) -> float | None:
+        """``θ̂ = −1/(s₀ ‖z_ij‖)`` (kept between updates; the regression changes only then)."""
+        return self._theta
 
     @property
     def distance(self) -> float | None:

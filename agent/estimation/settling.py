@@ -10,13 +10,8 @@ O(size of the estimate) per update.
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Sequence
-
-
-def _distance(a: Sequence[float], b: Sequence[float]) -> float:
-    return math.sqrt(sum((x - y) * (x - y) for x, y in zip(a, b)))
 
 
 class SettleDetector:
@@ -32,14 +27,18 @@ class SettleDetector:
 
     def update(self, value: Sequence[float], tick: int) -> bool:
         """Feed the estimate at ``tick``; returns whether it is settled now."""
-        current = tuple(value)
         past = self._past
         if past:
-            size = max(math.sqrt(sum(v * v for v in current)), self.floor)
-            limit = self.tolerance * size
-            quiet = _distance(current, past[-1]) <= limit and _distance(current, past[0]) <= limit
+            last, oldest = past[-1], past[0]
+            size2 = step2 = drift2 = 0.0
+            for v, a, b in zip(value, last, oldest):
+                size2 += v * v
+                step2 += (v - a) * (v - a)
+                drift2 += (v - b) * (v - b)
+            limit2 = self.tolerance * self.tolerance * max(size2, self.floor * self.floor)
+            quiet = step2 <= limit2 and drift2 <= limit2
             self.streak = self.streak + 1 if quiet else 0
-        past.append(current)
+        past.append(tuple(value))
         if self.settled and self.first_settled is None:
             self.first_settled = tick
         return self.settled
