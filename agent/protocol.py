@@ -156,12 +156,16 @@ class Keys:
 
     @staticmethod
     def robot_of(key: str) -> int:
-        """The robot id in a ``…/robot/<id>/…`` key (``DecodeError`` if there is none)."""
+        """The robot id in a ``heft/<team>/robot/<id>/…`` key (``DecodeError`` if none)."""
         parts = key.split("/")
-        try:
-            return int(parts[parts.index("robot") + 1])
-        except (ValueError, IndexError) as err:
-            raise DecodeError(f"no robot id in key {key!r}") from err
+        if (
+            len(parts) < 4
+            or parts[0] != "heft"
+            or parts[2] != "robot"
+            or not (parts[3].isascii() and parts[3].isdigit())
+        ):
+            raise DecodeError(f"no robot id in key {key!r}")
+        return int(parts[3])
 
 
 @dataclass(frozen=True, slots=True)
@@ -270,14 +274,91 @@ def _unpack(layout: _struct.Struct, body: memoryview, name: str) -> tuple:
     return values
 
 
+def _no_constants(name: str):
+    raise ValueError(f"{name} is not a number this protocol accepts")
+
+
 def _json_body(body: memoryview, name: str) -> dict:
     try:
-        data = _json.loads(bytes(body))
-    except (UnicodeDecodeError, ValueError) as err:
-        raise DecodeError(f"{name}: not JSON ({err})") from None
+        data = _json.loads(bytes(body), parse_constant=_no_constants)
+    except (UnicodeDecodeError, ValueError, RecursionError) as err:
+        raise DecodeError(f"{name}: not JSON ({type(err).__name__}: {err})") from None
     if not isinstance(data, dict):
         raise DecodeError(f"{name}: expected a JSON object")
     return data
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_number(v) -> bool:
+    return (isinstance(v, (int, float)) and not isinstance(v, bool)) and _math.isfinite(v)
+
+
+def _is_pair(v) -> bool:
+    return isinstance(v, list) and len(v) == 2 and all(_is_number(x) for x in v)
+
+
+def _check(ok: bool, name: str, key: str) -> None:
+    if not ok:
+        raise DecodeError(f"{name}: {key} has the wrong type")
+
+
+def _int_keys(d, name: str, key: str, value_ok) -> dict:
+    _check(isinstance(d, dict), name, key)
+    out = {}
+    for k, v in d.items():
+        _check(k.isascii() and k.isdigit() and value_ok(v), name, key)
+        out[int(k)] = tuple(v) if isinstance(v, list) else v
+    return out
+
+
+_ESTIMATE_NUMBERS = ("omega", "spread", "moment", "mass")
+_ESTIMATE_PAIRS = (
+    "centroid_offset",
+    "com_offset",
+    "com_observer",
+    "com_velocity",
+    "contact_to_com",
+)
+
+
+def _estimates(data: dict) -> Estimates:
+    name = "estimates"
+    if set(data) != set(Estimates.__dataclass_fields__):
+        raise DecodeError(f"{name}: keys {sorted(data)} are not those of estimates")
+    _check(_is_int(data["robot"]) and _is_int(data["tick"]), name, "robot/tick")
+    _check(isinstance(data["phase"], str), name, "phase")
+    for key in _ESTIMATE_NUMBERS:
+        _check(data[key] is None or _is_number(data[key]), name, key)
+    for key in _ESTIMATE_PAIRS:
+        _check(data[key] is None or _is_pair(data[key]), name, key)
+        if data[key] is not None:
+            data[key] = tuple(data[key])
+    data["relative_positions"] = _int_keys(
+        data["relative_positions"], name, "relative_positions", _is_pair
+    )
+    data["started"] = _int_keys(data["started"], name, "started", _is_int)
+    data["settled"] = _int_keys(data["settled"], name, "settled", _is_int)
+    return Estimates(**data)
+
+
+def _status(data: dict) -> Status:
+    name = "status"
+    known = set(Status.__dataclass_fields__)
+    if not {"robot", "tick", "phase"} <= set(data) <= known:
+        raise DecodeError(f"{name}: keys {sorted(data)} are not those of status")
+    for key in ("rejected", "decode_errors", "late"):
+        data.setdefault(key, 0)
+    data.setdefault("lost_neighbours", [])
+    for key in ("robot", "tick", "rejected", "decode_errors", "late"):
+        _check(_is_int(data[key]), name, key)
+    _check(isinstance(data["phase"], str), name, "phase")
+    lost = data["lost_neighbours"]
+    _check(isinstance(lost, list) and all(_is_int(j) for j in lost), name, "lost_neighbours")
+    data["lost_neighbours"] = tuple(lost)
+    return Status(**data)
 
 
 def decode(kind: type | str, payload: bytes):
@@ -323,24 +404,4 @@ def decode(kind: type | str, payload: bytes):
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))
     data = _json_body(body, kind.__name__.lower())
-    try:
-        if kind is Estimates:
-            data["relative_positions"] = {
-                int(j): tuple(v) for j, v in data["relative_positions"].items()
-            }
-            data["started"] = {int(s): t for s, t in data["started"].items()}
-            data["settled"] = {int(s): t for s, t in data["settled"].items()}
-            for key in (
-                "centroid_offset",
-                "com_offset",
-                "com_observer",
-                "com_velocity",
-                "contact_to_com",
-            ):
-                if data[key] is not None:
-                    data[key] = tuple(data[key])
-            return Estimates(**data)
-        data["lost_neighbours"] = tuple(data.get("lost_neighbours", ()))
-        return Status(**data)
-    except (KeyError, TypeError, ValueError, AttributeError) as err:
-        raise DecodeError(f"{kind.__name__.lower()}: malformed ({err})") from None
+    return _estimates(data) if kind is Estimates else _status(data)

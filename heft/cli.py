@@ -114,6 +114,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from heft.results import format_table, results_dict
 
     scenario = _load(args.scenario)
+    faults = _faults(args, scenario)
     if args.out is not None:
         _check_writable(Path(args.out))
     if args.plot is not None:
@@ -123,11 +124,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"{PROG}: running {scenario.name!r} ({scenario.n} robots)", file=sys.stderr)
         progress = _progress_printer(time.perf_counter(), sys.stderr)
     if args.transport == "zenoh":
-        outcome = _run_zenoh(args, scenario)
+        outcome = _run_zenoh(args, scenario, faults)
     else:
         every = max(1, round(PROGRESS_EVERY_S / scenario.period_s))
         transport = None
-        faults = _faults(args, scenario)
         if faults.active:
             from agent.faults import FaultyTransport
             from agent.transport import InMemoryTransport
@@ -163,21 +163,17 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _faults(args: argparse.Namespace, scenario: Scenario):
-    from agent.config import ConfigError
     from agent.faults import FaultSettings
 
-    faults = FaultSettings(drop=args.drop, delay_s=args.delay_ms / 1000.0, seed=scenario.run.seed)
-    try:
-        faults.validate("--drop/--delay-ms")
-    except ConfigError as err:
-        raise UsageError(str(err)) from None
-    return faults
+    if not 0.0 <= args.drop < 1.0:
+        raise UsageError(f"--drop: expected a probability in [0, 1), got {args.drop:g}")
+    if not args.delay_ms >= 0.0:
+        raise UsageError(f"--delay-ms: expected a number >= 0, got {args.delay_ms:g}")
+    return FaultSettings(drop=args.drop, delay_s=args.delay_ms / 1000.0, seed=scenario.run.seed)
 
 
-def _run_zenoh(args: argparse.Namespace, scenario: Scenario) -> RunOutcome:
+def _run_zenoh(args: argparse.Namespace, scenario: Scenario, faults) -> RunOutcome:
     from heft.launcher import run_zenoh
-
-    faults = _faults(args, scenario)
 
     def report(time_s: float, phases: str) -> None:
         if not args.quiet:
