@@ -25,7 +25,6 @@ told to stop.
 from __future__ import annotations
 
 import logging
-import queue
 import signal
 import threading
 import time
@@ -37,7 +36,7 @@ from agent.agent import DONE, HALTED, PHASES, Agent
 from agent.config import AgentConfig, AgentTuning, ConfigError, from_table
 from agent.faults import FaultSettings
 from agent.protocol import Clock, DecodeError, Keys, Measurement, Status, decode, encode
-from agent.zenoh_session import ZenohSettings, open_session, tick_publisher
+from agent.zenoh_session import EventQueue, ZenohSettings, open_session, tick_publisher
 from agent.zenoh_transport import ZenohTransport
 
 log = logging.getLogger("heft.agent")
@@ -118,7 +117,7 @@ class AgentNode:
         self.keys = Keys(config.team)
         self.agent = Agent(config.agent_config())
         self.stop = stop or threading.Event()
-        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.events = EventQueue()
         self.measurements: dict[int, Measurement] = {}
         self.shares = []
         self.have: set[tuple[int, int]] = set()
@@ -280,12 +279,7 @@ class AgentNode:
         while not self.stop.is_set():
             due = self.transport.next_release()
             timeout = 0.05 if due is None else max(0.0, min(0.05, due - time.monotonic()))
-            try:
-                self._handle(self.events.get(timeout=timeout))
-                while True:
-                    self._handle(self.events.get_nowait())
-            except queue.Empty:
-                pass
+            self.events.drain(self._handle, timeout)
             self._collect_shares()
             if self.config.clock == "realtime" and self.measurements:
                 self.next_tick = max(self.next_tick, min(self.measurements))

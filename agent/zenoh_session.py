@@ -9,6 +9,7 @@ not up yet instead of failing at once.
 from __future__ import annotations
 
 import json
+import queue
 import re
 from dataclasses import dataclass
 
@@ -86,3 +87,26 @@ def tick_publisher(session, key: str):
     return session.declare_publisher(
         key, express=True, congestion_control=zenoh.CongestionControl.BLOCK
     )
+
+
+class EventQueue:
+    """Where a process's Zenoh callbacks leave what they receive, for its main thread.
+
+    Callbacks run on Zenoh's threads and must stay tiny (a busy thread holding the GIL delays
+    them by milliseconds): they only :meth:`put`; the main thread :meth:`drain`\\ s.
+    """
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+
+    def put(self, event) -> None:
+        self._queue.put(event)
+
+    def drain(self, handle, timeout: float | None) -> None:
+        """Wait up to ``timeout`` s for an event, then ``handle`` it and every other queued."""
+        try:
+            handle(self._queue.get(timeout=timeout))
+            while True:
+                handle(self._queue.get_nowait())
+        except queue.Empty:
+            pass

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import queue
 import re
 import signal
 import socket
@@ -29,7 +28,7 @@ from typing import TextIO
 
 from agent.faults import FaultSettings
 from agent.protocol import DecodeError, Estimates, Keys, Status, decode, encode_json
-from agent.zenoh_session import ZenohSettings, open_session
+from agent.zenoh_session import EventQueue, ZenohSettings, open_session
 from heft.inprocess import RunOutcome, Sample
 from simulator.plant import Truth
 from simulator.scenario import Scenario, scenario_to_toml
@@ -144,7 +143,7 @@ class Collector:
     def __init__(self, session, keys: Keys, n: int, record_every: int):
         self.n = n
         self.record_every = record_every
-        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.events = EventQueue()
         self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
         self.truths: dict[int, Truth] = {}
         self.history: list[Sample] = []
@@ -177,12 +176,7 @@ class Collector:
         ]
 
     def drain(self, timeout: float) -> None:
-        try:
-            self._handle(*self.events.get(timeout=timeout))
-            while True:
-                self._handle(*self.events.get_nowait())
-        except queue.Empty:
-            pass
+        self.events.drain(lambda event: self._handle(*event), timeout)
 
     def _handle(self, kind: str, payload: bytes) -> None:
         if self._finished and kind != "plant":

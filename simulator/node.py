@@ -18,14 +18,13 @@ Robots whose agent's liveliness token disappears get zero force from then on.
 from __future__ import annotations
 
 import logging
-import queue
 import statistics
 import threading
 import time
 from dataclasses import asdict
 
 from agent.protocol import Clock, Command, DecodeError, Keys, decode, encode, encode_json
-from agent.zenoh_session import ZenohSettings, open_session, tick_publisher
+from agent.zenoh_session import EventQueue, ZenohSettings, open_session, tick_publisher
 from simulator.plant import Plant, Truth
 from simulator.scenario import Scenario
 
@@ -56,7 +55,7 @@ class PlantNode:
         self.clock = clock
         self.stop = stop or threading.Event()
         self.start_timeout_s = start_timeout_s
-        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.events = EventQueue()
         self.alive: set[int] = set()
         self.lost: set[int] = set()
         self.commands: dict[int, Command] = {}
@@ -144,12 +143,7 @@ class PlantNode:
                 self.alive.add(robot)
 
     def _drain(self, timeout: float | None) -> None:
-        try:
-            self._handle(self.events.get(timeout=timeout))
-            while True:
-                self._handle(self.events.get_nowait())
-        except queue.Empty:
-            pass
+        self.events.drain(self._handle, timeout)
 
     # ------------------------------------------------------------------ ticks
     def _publish(self) -> None:

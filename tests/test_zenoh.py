@@ -31,30 +31,27 @@ from tests.test_runs import PAPER, assert_within
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _children_of(pid: int) -> list[int]:
+def _processes(field: int, value: int) -> list[int]:
+    """Processes whose ``/proc/<pid>/stat`` field (after the command: 1 = parent, 3 = session)
+    is ``value``, other than ``value`` itself."""
     found = []
     for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
+        if entry.name.isdigit() and int(entry.name) != value:
             try:
                 stat = (entry / "stat").read_text().rsplit(")", 1)[1].split()
             except OSError:
                 continue
-            if int(stat[1]) == pid:
+            if int(stat[field]) == value:
                 found.append(int(entry.name))
     return found
+
+
+def _children_of(pid: int) -> list[int]:
+    return _processes(1, pid)
 
 
 def _in_session(sid: int) -> list[int]:
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(stat[3]) == sid and int(entry.name) != sid:
-                found.append(int(entry.name))
-    return found
+    return _processes(3, sid)
 
 
 def assert_same_estimates(a: RunOutcome, b: RunOutcome, rel: float = 1e-6) -> None:
