@@ -35,7 +35,7 @@ from pathlib import Path
 from agent.agent import DONE, HALTED, PHASES, Agent
 from agent.config import AgentConfig, AgentTuning, ConfigError, from_table
 from agent.faults import FaultSettings
-from agent.protocol import Clock, DecodeError, Keys, Measurement, Status, decode, encode
+from agent.protocol import DecodeError, Keys, Measurement, Status, decode, encode
 from agent.zenoh_session import EventQueue, ZenohSettings, open_session, tick_publisher
 from agent.zenoh_transport import ZenohTransport
 
@@ -311,6 +311,3 @@ def run_agent(config: AgentNodeConfig) -> int:
             return node.run()
         finally:
             node.close()
-
-
-__all__ = ["AgentNode", "AgentNodeConfig", "Clock", "load_agent_config", "run_agent"]

@@ -40,13 +40,13 @@ def cmd_agent(args: argparse.Namespace) -> int:
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    from agent.zenoh_session import ZenohSettings
+    from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings
     from heft.cli import UsageError, _load
     from simulator.node import run_plant
 
     scenario = _load(args.scenario)
     try:
-        settings = ZenohSettings(mode="client", connect=tuple(args.connect))
+        settings = ZenohSettings(mode="client", connect=tuple(args.connect or [DEFAULT_ROUTER]))
         settings.validate("--connect")
     except ConfigError as err:
         raise UsageError(str(err)) from None
@@ -62,18 +62,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from agent.zenoh_session import ZenohSettings, open_session
+    from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings, open_session
     from heft.cli import UsageError
 
     try:
-        settings = ZenohSettings(mode="router", connect=(), listen=tuple(args.listen))
+        listen = tuple(args.listen or [DEFAULT_ROUTER])
+        settings = ZenohSettings(mode="router", connect=(), listen=listen)
         settings.validate("--listen")
     except ConfigError as err:
         raise UsageError(str(err)) from None
     _logging()
     stop = _stop_on_signals()
     with open_session(settings):
-        logging.getLogger("heft.router").info("router listening on %s", ", ".join(args.listen))
+        logging.getLogger("heft.router").info("router listening on %s", ", ".join(listen))
         stop.wait()
     logging.getLogger("heft.router").info("router stopped")
     return 0
@@ -143,7 +144,7 @@ def add_commands(commands: argparse._SubParsersAction, formatter, add_output_opt
         metavar="S",
         help="give up if the agents are not all up after S seconds (default: 30)",
     )
-    sim.set_defaults(handler=_with_default_connect(cmd_sim, DEFAULT_ROUTER))
+    sim.set_defaults(handler=cmd_sim)
 
     router = commands.add_parser(
         "router",
@@ -159,7 +160,7 @@ def add_commands(commands: argparse._SubParsersAction, formatter, add_output_opt
         default=None,
         help=f"endpoint to listen on (default: {DEFAULT_ROUTER})",
     )
-    router.set_defaults(handler=_with_default_listen(cmd_router, DEFAULT_ROUTER))
+    router.set_defaults(handler=cmd_router)
 
     demo = commands.add_parser(
         "demo",
@@ -173,19 +174,3 @@ def add_commands(commands: argparse._SubParsersAction, formatter, add_output_opt
     )
     add_output_options(demo)
     demo.set_defaults(handler=cmd_demo)
-
-
-def _with_default_connect(handler, default: str):
-    def run(args: argparse.Namespace) -> int:
-        args.connect = args.connect or [default]
-        return handler(args)
-
-    return run
-
-
-def _with_default_listen(handler, default: str):
-    def run(args: argparse.Namespace) -> int:
-        args.listen = args.listen or [default]
-        return handler(args)
-
-    return run
