@@ -8,9 +8,11 @@ robot's internals, and it does no I/O: transports and processes live outside it.
 
 Timing. Robot ``i`` has its own sample of tick ``k`` but its neighbours' samples only up to
 ``k − 1`` (they arrive with their messages). So its estimates at tick ``k`` refer to the
-*estimation instant* ``e = k − 1``, the newest instant with every neighbour's velocity, and the
-force for ``[t_k, t_{k+1})`` is predicted from them. Whatever the transport's timing, a step
-uses only messages stamped before ``k``, so runs are reproducible.
+*estimation instant* ``e``, the newest instant with every neighbour's velocity: ``k − 1`` when
+messages arrive within a tick, earlier when they are late (instants skipped are caught up in
+order). The force for ``[t_k, t_{k+1})`` is predicted from them. A step uses only messages
+stamped before ``k``, so a run whose messages arrive in time is reproducible whatever the
+transport's timing.
 
 Phases (force regimes), switched by the team's barrier (:mod:`agent.coordination`) once every
 robot's own estimates have settled:
@@ -147,8 +149,13 @@ class Agent:
             if latest is None or s.tick > latest.tick:
                 self._latest[s.sender] = s
                 self._fresh.add(s.sender)
-        if k >= 1:
-            self._estimate(k - 1)
+        # The newest instant every neighbour has reported (k - 1 unless messages are late);
+        # instants skipped since the last step are estimated in order.
+        newest = min((s.tick for s in self._latest.values()), default=-1)
+        if len(self._latest) < self.degree:
+            newest = -1
+        for e in range(self.instant + 1, min(k - 1, newest) + 1):
+            self._estimate(e)
         if self.barrier.step(k, self._ready(k), self._latest.values()):
             self._enter(self.barrier.phase, k)
         force = saturate(self._force(k), self.tuning.max_force)
@@ -163,6 +170,7 @@ class Agent:
             ready=self.barrier.ready,
             switch_at=self.barrier.switch_at,
             flows=tuple((j, *f) for j, f in self.flows.flows.items()),
+            instant=self.instant,
         )
         self._forget(k - HISTORY_TICKS)
         return Command(self.robot, k, force), share
@@ -233,7 +241,7 @@ class Agent:
             s = self._latest[j]
             for k, fx, fy, fs in s.flows:
                 if k == self.robot:
-                    vx, vy = rotate((fx, fy), self._turned_since(s.tick - 1))
+                    vx, vy = rotate((fx, fy), self._turned_since(s.instant))
                     flows.adopt(j, (vx, vy, fs))
         self._fresh.clear()
         fx, fy, fs = flows.outflow()
@@ -248,10 +256,10 @@ class Agent:
             dx = dy = 0.0
             if s.centroid is not None:
                 # Usually one tick old: turned by this tick's turn, already applied to the flows.
-                if s.tick - 1 == previous:
+                if s.instant == previous:
                     x_j = flows.turned(s.centroid)
                 else:
-                    x_j = rotate(s.centroid, self._turned_since(s.tick - 1))
+                    x_j = rotate(s.centroid, self._turned_since(s.instant))
                 dx, dy = centroid_term(a, x, x_j, self.relative_position(j) or (0.0, 0.0))
             ds = consensus_term(a, xi, s.spread)
             flows.push(j, dx, dy, ds)
@@ -398,7 +406,7 @@ class Agent:
             return spin_up_force(self.tuning.spin_gain, self.tuning.spin_speed, self.zdot.values())
         if phase == INERTIA:
             # Speed the turn up until |ω| reaches the limit, then brake down to half of it.
-            speed = abs(self._omega_now())
+            speed = abs(self._omega_at(k))
             if speed >= self.tuning.inertia_max_omega:
                 self.inertia_direction = -1.0
             elif speed <= 0.5 * self.tuning.inertia_max_omega:
@@ -412,15 +420,15 @@ class Agent:
             return self.push
         return (0.0, 0.0)
 
-    def _omega_now(self) -> float:
-        """ω at the current instant: measured, or — when every neighbour's message of this
-        instant was lost — predicted from the last measurement with the torque the team applied
-        since (Step 4) and ``Ĵ``, so that every robot takes the same decisions."""
+    def _omega_at(self, tick: int) -> float:
+        """ω at ``t_tick``, predicted from the last instant it was measured with the torque the
+        team applied since (Step 4) and ``Ĵ``: every robot, whichever messages it has received,
+        predicts the same value, so they all take the same decisions."""
         omega = self.omega or 0.0
         moment = self.inertia.moment if self.inertia is not None else None
-        if self._measured is None or self._measured >= self.instant or moment is None:
+        if self._measured is None or moment is None:
             return omega
-        impulse = sum(self._inertia_torque.get(t, 0.0) for t in range(self._measured, self.instant))
+        impulse = sum(self._inertia_torque.get(t, 0.0) for t in range(self._measured, tick))
         return omega + impulse * self.dt / moment
 
     def _forget(self, before: int) -> None:

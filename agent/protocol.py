@@ -50,8 +50,9 @@ class Share:
     """What agent ``sender`` sends its neighbours after its step at ``tick``.
 
     ``velocity`` is the sender's sample of ``tick``. The consensus states refer to the
-    sender's *estimation instant* ``tick - 1`` (the newest instant for which it had its
-    neighbours' velocities); vectors are in ``W`` at that instant.
+    sender's *estimation instant* ``instant`` (the newest instant for which it had its
+    neighbours' velocities: ``tick - 1`` unless messages were late; ``-1`` before any);
+    vectors are in ``W`` at that instant.
 
     - ``degree``: the sender's number of neighbours (Metropolis consensus weights).
     - ``centroid``: the sender's centroid iterate ``x_i`` (Aragues et al. [10]) or ``None``.
@@ -73,6 +74,7 @@ class Share:
     ready: int = 0
     switch_at: int = -1
     flows: tuple[tuple[int, float, float, float], ...] = ()
+    instant: int = -1
 
 
 @dataclass(frozen=True, slots=True)
@@ -192,7 +194,7 @@ class Status:
 # kind byte → (type, struct of the body)
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct("<Hq2dHB2ddBQqB")
+_SHARE = _struct.Struct("<Hq2dHB2ddBQqqB")
 _FLOW = _struct.Struct("<H3d")
 _CLOCK = _struct.Struct("<qd")
 _KIND = {Measurement: 1, Command: 2, Share: 3, Clock: 4, Estimates: 5, Status: 6}
@@ -229,6 +231,7 @@ def encode(message: object) -> bytes:
             m.phase,
             m.ready,
             m.switch_at,
+            m.instant,
             len(m.flows),
         )
         return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
@@ -379,7 +382,7 @@ def decode(kind: type | str, payload: bytes):
         return Command(r, t, (fx, fy))
     if kind is Share:
         fixed = body[: _SHARE.size]
-        s, t, vx, vy, deg, has, cx, cy, spread, phase, ready, switch_at, count = _unpack(
+        s, t, vx, vy, deg, has, cx, cy, spread, phase, ready, switch_at, instant, count = _unpack(
             _SHARE, fixed, "share"
         )
         rest = body[_SHARE.size :]
@@ -400,6 +403,7 @@ def decode(kind: type | str, payload: bytes):
             ready,
             switch_at,
             flows,
+            instant,
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))

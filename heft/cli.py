@@ -169,6 +169,8 @@ def _faults(args: argparse.Namespace, scenario: Scenario):
         raise UsageError(f"--drop: expected a probability in [0, 1), got {args.drop:g}")
     if not args.delay_ms >= 0.0:
         raise UsageError(f"--delay-ms: expected a number >= 0, got {args.delay_ms:g}")
+    if args.delay_ms and args.transport != "zenoh":
+        raise UsageError("--delay-ms needs --transport zenoh (in one process time is simulated)")
     return FaultSettings(drop=args.drop, delay_s=args.delay_ms / 1000.0, seed=scenario.run.seed)
 
 
@@ -345,7 +347,7 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
         type=float,
         default=0.0,
         metavar="MS",
-        help="delay added to every message between agents, on the wall clock (default: 0)",
+        help="with zenoh: delay added to every message between agents (default: 0)",
     )
     _add_output_options(parser)
     parser.set_defaults(handler=cmd_run)

@@ -5,7 +5,8 @@ Each tick ``k``: the plant is sampled, every agent steps on its own measurement 
 messages delivered to it so far (it uses those stamped before ``k``), the agents' force commands
 go to the plant, their messages go through the transport, and the plant advances one sensor
 period. The run ends once every agent has reached the ``done`` phase, or at the scenario's
-``max_time_s``. Ground truth is recorded beside the agents' estimates, for evaluation only.
+``max_time_s``. Ground truth is recorded beside the agents' estimates of the same instant, for
+evaluation only (an agent that lost a message may lag a tick: such instants are not recorded).
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ from simulator.plant import Plant, Truth
 from simulator.scenario import Scenario
 
 Progress = Callable[[int, float, list[Agent]], None]
+ALIGN_TICKS = 64
+"""Ticks a finishing run waits for every agent's estimates to refer to the same instant."""
 
 
 @dataclass
@@ -88,9 +91,10 @@ def run_inprocess(
     converged = False
     pending: Truth | None = None  # truth at the instant the next step's estimates refer to
     final: Sample | None = None
-    last = max_ticks + 1  # the tick after which the run stops
+    finishing = False  # done (or out of time): stop at the next sample of aligned estimates
+    give_up = max_ticks + ALIGN_TICKS
     k = 0
-    while k <= last:
+    while k <= give_up:
         measurements = plant.measure()
         shares = []
         for agent, measurement in zip(agents, measurements):
@@ -99,18 +103,22 @@ def run_inprocess(
             shares.append(share)
         for share in shares:
             transport.send(share)
-        if pending is not None:  # the agents' estimates now refer to tick k - 1
+        # Estimates of tick k - 1, unless an agent lags behind a late or lost message.
+        if pending is not None and all(a.instant == k - 1 for a in agents):
             final = _sample(k - 1, scenario, pending, agents)
             history.append(final)
+            if finishing:
+                break
         team_phase = min(a.phase for a in agents)
         phase_ticks.setdefault(PHASES[team_phase], k)
         if progress is not None and k % progress_every == 0:
             progress(k, k * scenario.period_s, agents)
-        if team_phase >= DONE and last > k + 1:
+        if not finishing and (team_phase >= DONE or k >= max_ticks):
+            finishing = True
             converged = all(a.phase == DONE for a in agents)
-            last = k + 1  # one more tick, for estimates of this instant
+            give_up = k + ALIGN_TICKS
         # The plant has not moved since it was sampled: its truth is that of tick k.
-        pending = plant.truth() if (k % record_every == 0 or k >= last - 1) else None
+        pending = plant.truth() if (k % record_every == 0 or finishing) else None
         plant.advance()
         k += 1
     assert final is not None

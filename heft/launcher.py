@@ -246,6 +246,11 @@ class Collector:
         for old in [t for t in self.truths if t <= instant]:
             del self.truths[old]
 
+    def conclude(self) -> None:
+        """The run is over, whatever the team says next."""
+        self.finished()
+        self._finished = True
+
     def finished(self) -> bool:
         done = self.done_instant
         # After a halt, a moment more to hear who was lost (agents and plant report it).
@@ -350,6 +355,7 @@ def run_zenoh(
                         progress_every_s,
                         started + wall_timeout_s,
                     )
+                    collector.conclude()  # agents leaving from now on are not lost robots
                     cpu.update({child.name: child.cpu_seconds() for child in children})
                     session.put(keys.control, encode_json("control", {"command": "stop"}))
                     for child in children[1:]:
