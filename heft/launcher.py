@@ -240,7 +240,10 @@ class Collector:
         if instant % self.record_every == self.record_every - 1 or instant == done:
             self.history.append(sample)
         if done is None or instant <= done:
-            # The final instant is the first at which the whole team was done, as in-process.
+            self.final = sample  # so far: the newest instant before the team was done
+        elif self.final is None or self.final.truth.tick < done:
+            # The first complete instant once the whole team was done (as in-process; a robot
+            # catching up on late messages may not publish every instant).
             self.final = sample
         del self.estimates[instant]
         for old in [t for t in self.truths if t <= instant]:

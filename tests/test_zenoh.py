@@ -87,6 +87,16 @@ def test_realtime_over_zenoh_converges_within_bounds() -> None:
     assert outcome.transport["stepping_wall_s"] >= 0.9 * outcome.sim_time_s
 
 
+def test_realtime_with_messages_two_ticks_late_converges() -> None:
+    """20 ms on every link between agents: each estimates two ticks further back, and must
+    still turn its neighbours' states by the right angle."""
+    faults = FaultSettings(delay_s=0.02)
+    outcome = run_zenoh(
+        load_scenario(PAPER), clock="realtime", faults=faults, log_stream=io.StringIO()
+    )
+    assert_within(outcome, rel=0.005, metres=0.005)
+
+
 def test_lockstep_with_ten_percent_of_messages_lost_converges() -> None:
     faults = FaultSettings(drop=0.1, seed=3)
     outcome = run_zenoh(load_scenario(PAPER), faults=faults, log_stream=io.StringIO())
