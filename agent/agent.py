@@ -151,9 +151,10 @@ class Agent:
                 self._fresh.add(s.sender)
         # The newest instant every neighbour has reported (k - 1 unless messages are late);
         # instants skipped since the last step are estimated in order.
-        newest = min((s.tick for s in self._latest.values()), default=-1)
-        if len(self._latest) < self.degree:
-            newest = -1
+        newest = k - 1 if len(self._latest) == self.degree else -1
+        for s in self._latest.values():
+            if s.tick < newest:
+                newest = s.tick
         for e in range(self.instant + 1, min(k - 1, newest) + 1):
             self._estimate(e)
         if self.barrier.step(k, self._ready(k), self._latest.values()):
@@ -485,12 +486,10 @@ def _usable(share: Share, tick: int) -> bool:
     """A share whose numbers an agent can use at ``tick``: finite, and not stamped so far
     ahead that it could only come from a clock gone wrong."""
     vx, vy = share.velocity
-    return (
-        math.isfinite(vx)
-        and math.isfinite(vy)
-        and math.isfinite(share.spread)
-        and (share.centroid is None or all(map(math.isfinite, share.centroid)))
-        and share.tick < tick + HISTORY_TICKS
+    c = share.centroid or (0.0, 0.0)
+    # x - x == 0 exactly for every finite float, and is NaN for NaN and ±inf.
+    return vx - vx + vy - vy + c[0] - c[0] + c[1] - c[1] + share.spread - share.spread == 0.0 and (
+        share.tick < tick + HISTORY_TICKS
     )
 
 
