@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import heapq
 import random
+import time
 from dataclasses import dataclass, field
 
 from agent.config import ConfigError
@@ -46,7 +47,6 @@ class LinkFaults:
     robot: int = 0
     dropped: set[tuple[int, int]] = field(default_factory=set)
     """``(sender, tick)`` of every message dropped so far (pruned by :meth:`forget`)."""
-    delivered: int = 0
 
     def __post_init__(self) -> None:
         self._rng = random.Random(self.settings.seed * 7919 + self.robot)
@@ -66,7 +66,6 @@ class LinkFaults:
         out = []
         while self._held and self._held[0][0] <= now:
             out.append(heapq.heappop(self._held)[2])
-        self.delivered += len(out)
         return out
 
     def next_release(self) -> float | None:
@@ -80,12 +79,10 @@ class FaultyTransport:
     """Any :class:`~agent.transport.Transport`, with faults applied to what each robot
     receives (in-process runs and tests; the Zenoh transport applies them itself)."""
 
-    def __init__(self, inner, settings: FaultSettings, clock=None):
-        import time
-
+    def __init__(self, inner, settings: FaultSettings, clock=time.monotonic):
         self.inner = inner
         self.settings = settings
-        self._clock = clock or time.monotonic
+        self._clock = clock
         self._faults: dict[int, LinkFaults] = {}
 
     def send(self, share: Share) -> None:

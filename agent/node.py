@@ -35,12 +35,11 @@ from pathlib import Path
 from agent.agent import DONE, HALTED, PHASES, Agent
 from agent.config import AgentConfig, AgentTuning, ConfigError, from_table
 from agent.faults import FaultSettings
-from agent.protocol import DecodeError, Keys, Measurement, Status, decode, encode
+from agent.protocol import CLOCKS, DecodeError, Keys, Measurement, Status, decode, encode
 from agent.zenoh_session import EventQueue, ZenohSettings, open_session, tick_publisher
 from agent.zenoh_transport import ZenohTransport
 
 log = logging.getLogger("heft.agent")
-CLOCKS = ("lockstep", "realtime")
 RESEND_AFTER_S = 0.2
 """An agent idle this long sends its latest share again (lockstep tolerates lost messages)."""
 
@@ -121,7 +120,6 @@ class AgentNode:
         self.measurements: dict[int, Measurement] = {}
         self.shares = []
         self.have: set[tuple[int, int]] = set()
-        self.alive: set[int] = set()
         self.lost: set[int] = set()
         self.decode_errors = 0
         self.late = 0
@@ -185,10 +183,9 @@ class AgentNode:
             if body.get("command") == "stop":
                 log.info("robot %d: told to stop", self.config.robot)
                 self.stop.set()
-        elif kind == "alive":
+        elif kind == "alive":  # a neighbour's token appeared (nothing to do) or disappeared
             j, what = event[1], event[2]
             if "DELETE" in what.upper():
-                self.alive.discard(j)
                 if self.agent.phase == DONE or self.stop.is_set():
                     log.info(
                         "robot %d: neighbour %d left after the team finished", self.config.robot, j
@@ -200,8 +197,6 @@ class AgentNode:
                     )
                 self.lost.add(j)
                 self.agent.halt()
-            else:
-                self.alive.add(j)
 
     def _decode_error(self, what: str, err) -> None:
         self.decode_errors += 1
@@ -249,9 +244,9 @@ class AgentNode:
             self.last_phase = agent.phase
             self._status.put(encode(self.status(k)))
         self.next_tick = k + 1
-        forget = k - 50
-        self.have = {(j, t) for j, t in self.have if t >= forget} if k % 50 == 0 else self.have
-        if k % 50 == 0:
+        if k % 50 == 0:  # forget what is too old to matter
+            forget = k - 50
+            self.have = {(j, t) for j, t in self.have if t >= forget}
             self.transport.faults.forget(forget)
             for old in [t for t in self.measurements if t < k]:
                 del self.measurements[old]

@@ -128,6 +128,8 @@ class Estimates:
 # and log those, never crash on them.
 
 WIRE_VERSION = 1
+CLOCKS = ("lockstep", "realtime")
+"""How the plant and the agents keep time (see :mod:`agent.node` and :mod:`simulator.node`)."""
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 

@@ -23,6 +23,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from agent.protocol import CLOCKS
 from heft.network_cli import add_commands as add_network_commands
 from simulator.scenario import Scenario, ScenarioError, load_scenario, scenario_to_toml
 
@@ -235,17 +236,22 @@ def cmd_bench(args: argparse.Namespace) -> int:
     scenario = _load(args.scenario)
 
     def on_run(k: int, outcome: RunOutcome) -> None:
-        state = "converged" if outcome.converged else "NOT converged"
-        print(
-            f"{PROG}: run {k}/{args.repeat}: {state}, {outcome.sim_time_s:.2f} s simulated"
-            f" in {outcome.wall_s:.3f} s wall",
-            file=sys.stderr,
-            flush=True,
-        )
+        _say_run(f"run {k}/{args.repeat}", outcome)
 
     report = run_benchmark(scenario, args.repeat, source=args.scenario, on_run=on_run)
     print(format_report(report))
     return 0
+
+
+def _say_run(label: str, outcome: RunOutcome) -> None:
+    """One progress line on stderr per benchmark run."""
+    state = "converged" if outcome.converged else "NOT converged"
+    print(
+        f"{PROG}: {label}: {state}, {outcome.sim_time_s:.2f} s simulated in"
+        f" {outcome.wall_s:.2f} s wall",
+        file=sys.stderr,
+        flush=True,
+    )
 
 
 def _bench_zenoh(sizes: str) -> int:
@@ -259,16 +265,7 @@ def _bench_zenoh(sizes: str) -> int:
         if n < 3 or 32 % n:
             raise UsageError(f"--sizes: a ring team needs n >= 3 dividing 32, got {n}")
 
-    def on_run(what: str, outcome: RunOutcome) -> None:
-        state = "converged" if outcome.converged else "NOT converged"
-        print(
-            f"{PROG}: {what}: {state}, {outcome.sim_time_s:.2f} s simulated in"
-            f" {outcome.wall_s:.2f} s wall",
-            file=sys.stderr,
-            flush=True,
-        )
-
-    print(format_zenoh_report(run_zenoh_benchmark(counts, on_run)))
+    print(format_zenoh_report(run_zenoh_benchmark(counts, _say_run)))
     return 0
 
 
@@ -279,13 +276,7 @@ def _bench_generated(count: int) -> int:
         raise UsageError(f"--generated must be at least 1, got {count}")
 
     def on_run(seed: int, outcome: RunOutcome) -> None:
-        state = "converged" if outcome.converged else "NOT converged"
-        print(
-            f"{PROG}: seed {seed}: {outcome.scenario.n} robots, {state},"
-            f" {outcome.sim_time_s:.2f} s simulated",
-            file=sys.stderr,
-            flush=True,
-        )
+        _say_run(f"seed {seed}, {outcome.scenario.n} robots", outcome)
 
     outcomes = run_generated(count, on_run)
     print(format_generated(outcomes))
@@ -330,7 +321,7 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--clock",
-        choices=("lockstep", "realtime"),
+        choices=CLOCKS,
         default="lockstep",
         help="with zenoh: lockstep (deterministic, faster than real time) or realtime"
         " (the wall clock) (default: lockstep)",

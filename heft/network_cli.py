@@ -10,6 +10,7 @@ import sys
 import threading
 
 from agent.config import ConfigError
+from agent.protocol import CLOCKS
 
 LOG_FORMAT = "%(asctime)s %(levelname)s %(message)s"
 
@@ -126,7 +127,7 @@ def add_commands(commands: argparse._SubParsersAction, formatter, add_output_opt
     sim.add_argument("--team", help="team name in the key expressions (default: scenario name)")
     sim.add_argument(
         "--clock",
-        choices=("lockstep", "realtime"),
+        choices=CLOCKS,
         default="lockstep",
         help="lockstep: wait for every command; realtime: the wall clock (default: lockstep)",
     )

@@ -66,12 +66,3 @@ class ComObserver:
         x1, x2 = self.state[0], self.state[1]
         ax, ay = self.axis_x, self.axis_y
         return (x1 * ax[0] + x2 * ay[0], x1 * ax[1] + x2 * ay[1])
-
-    def coordinates(self, com_offset: Vec2, omega: float) -> tuple[float, float, float]:
-        """A true state ``(x_1, x_2, x_3)`` in the observer's coordinates (for evaluation)."""
-        ax, ay = self.axis_x, self.axis_y
-        return (
-            com_offset[0] * ax[0] + com_offset[1] * ax[1],
-            com_offset[0] * ay[0] + com_offset[1] * ay[1],
-            omega,
-        )

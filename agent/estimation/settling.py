@@ -46,8 +46,3 @@ class SettleDetector:
     @property
     def settled(self) -> bool:
         return self.streak >= self.window
-
-    def reset(self) -> None:
-        self.streak = 0
-        self.first_settled = None
-        self._past.clear()
