@@ -5,8 +5,9 @@ The launcher starts a Zenoh router (``heft router``), the plant (``heft sim``) a
 multicast scouting off. It prefixes every child's log lines with its name, listens to the
 agents' estimates and status and to the plant's truth (as any display would), and builds the
 same :class:`~heft.inprocess.RunOutcome` as the in-process run. When the team is done (or halted,
-or out of time) it tells everyone to stop; whatever happens — success, failure, Ctrl-C — it
-stops every child it started (SIGTERM, then SIGKILL) and closes its own session.
+or out of time) it stops the plant, then tells the agents to stop; whatever happens — success,
+failure, Ctrl-C — it stops every child it started (SIGTERM, then SIGKILL) and closes its own
+session.
 """
 
 from __future__ import annotations
@@ -360,8 +361,13 @@ def run_zenoh(
                     )
                     collector.conclude()  # agents leaving from now on are not lost robots
                     cpu.update({child.name: child.cpu_seconds() for child in children})
+                    # The plant first, so that it never sees the agents leave as robots lost.
+                    plant = children[1]
+                    if plant.process.poll() is None:
+                        plant.process.send_signal(signal.SIGTERM)
+                    plant.stop()
                     session.put(keys.control, encode_json("control", {"command": "stop"}))
-                    for child in children[1:]:
+                    for child in children[2:]:
                         child.stop()
                     collector.drain(0.2)
                 finally:
