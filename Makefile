@@ -4,13 +4,16 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test test-quick lint bench clean
 
 demo: $(STAMP)  ## The paper's scenario, 4 robot processes over Zenoh in real time: table, JSON, plots.
 	$(BIN)/heft demo --out out/paper-results.json --plot out/plots
 
 test: $(STAMP) lint  ## Lint, then run the whole test suite.
 	$(BIN)/python -m pytest -q
+
+test-quick: $(STAMP) lint  ## Lint, then the tests not marked slow (no Zenoh, no processes).
+	$(BIN)/python -m pytest -q -m "not slow"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

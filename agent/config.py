@@ -8,6 +8,8 @@ message that names the key (``where.key``) and what was expected.
 from __future__ import annotations
 
 import dataclasses
+import enum
+import functools
 import math
 import types
 import typing
@@ -15,6 +17,9 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 T = TypeVar("T")
+MAX_ROBOTS = 32
+"""The largest team supported: in one process, and over Zenoh with every process on one
+2-core machine (16 robots stepped at 1.3x real time in lockstep there)."""
 
 
 class ConfigError(ValueError):
@@ -37,7 +42,24 @@ def coerce(value: Any, tp: Any, key: str) -> Any:
     """Check ``value`` against the annotation ``tp`` and convert it (lists become tuples)."""
     if dataclasses.is_dataclass(tp):
         return from_table(tp, value, key)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        names = [m.name.lower() for m in tp]
+        if not isinstance(value, str) or value not in names:
+            raise ConfigError(f"{key}: expected one of {', '.join(names)}, got {value!r}")
+        return tp[value.upper()]
     origin = typing.get_origin(tp)
+    if origin is dict:
+        key_type, value_type = typing.get_args(tp)
+        if not isinstance(value, dict):
+            raise ConfigError(f"{key}: expected a table, got {value!r}")
+        out = {}
+        for k, v in value.items():
+            if key_type is int:
+                if not (isinstance(k, str) and k.isascii() and k.isdigit() and len(k) < 20):
+                    raise ConfigError(f"{key}: expected integer keys, got {k!r}")
+                k = int(k)
+            out[k] = coerce(v, value_type, f"{key}[{k}]")
+        return out
     if origin in (typing.Union, types.UnionType):
         args = typing.get_args(tp)
         if value is None and type(None) in args:
@@ -80,11 +102,16 @@ def coerce(value: Any, tp: Any, key: str) -> Any:
     raise TypeError(f"unsupported annotation {tp!r} for {key}")
 
 
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
 def from_table(cls: type[T], table: Any, where: str) -> T:
     """Build dataclass ``cls`` from a TOML table; ``where`` prefixes key names in errors."""
     if not isinstance(table, dict):
         raise ConfigError(f"{where}: expected a table, got {table!r}")
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     unknown = sorted(set(table) - set(fields))
     if unknown:
@@ -104,6 +131,15 @@ def from_table(cls: type[T], table: Any, where: str) -> T:
     return obj
 
 
+def within(where: str, low: float, high: float, **values: float) -> None:
+    """Raise :class:`ConfigError` unless every value is in ``[low, high]``."""
+    for key, value in values.items():
+        if not low <= value <= high:
+            raise ConfigError(
+                f"{where}.{key}: expected a number in [{low:g}, {high:g}], got {value!r}"
+            )
+
+
 def positive(where: str, **values: float) -> None:
     """Raise :class:`ConfigError` unless every value is > 0."""
     for key, value in values.items():
@@ -118,76 +154,261 @@ def non_negative(where: str, **values: float) -> None:
             raise ConfigError(f"{where}.{key}: expected a non-negative number, got {value!r}")
 
 
+# ------------------------------------------------------------------------------ ranges
+MAX_SEED = 2**63 - 1
+"""The largest seed: every seed is in ``[0, 2**63 - 1]``."""
+
+
+def _number(value: float) -> str:
+    """A bound as messages and the README write it: 3600, 0.1, 1e-08, 6.28319, 2**63 - 1."""
+    if value == MAX_SEED:
+        return "2**63 - 1"
+    if isinstance(value, int) or (float(value).is_integer() and abs(value) < 1e16):
+        return str(int(value))
+    return f"{value:g}"
+
+
+@dataclass(frozen=True)
+class Bound:
+    """A field's documented range: ``low <= value <= high`` (``low < value`` if ``open_low``),
+    or exactly ``off`` when that is given (a setting that this value switches off).
+    ``min_ticks``: the lower end is also that many sensor periods, checked by
+    :func:`check_ticks` where the period is known."""
+
+    low: float
+    high: float
+    unit: str = ""
+    open_low: bool = False
+    off: float | None = None
+    min_ticks: float = 0.0
+
+    def text(self, low: float | None = None) -> str:
+        """The range as messages and the README write it: ``(0, 1000] N``, ``[1 tick, 60] s``,
+        ``0 (off) or [10 ticks, 3600] s``; ``low``, if given, replaces the lower end."""
+        if low is not None:
+            start = f"[{_number(low)}"
+        elif self.min_ticks:
+            start = "[1 tick" if self.min_ticks == 1 else f"[{_number(self.min_ticks)} ticks"
+        else:
+            start = f"{'(' if self.open_low else '['}{_number(self.low)}"
+        interval = f"{start}, {_number(self.high)}]" + (f" {self.unit}" if self.unit else "")
+        return interval if self.off is None else f"{_number(self.off)} (off) or {interval}"
+
+    def contains(self, value: float, low: float | None = None) -> bool:
+        """Whether ``value`` is in the range (with ``low`` as the lower end, if given)."""
+        if self.off is not None and value == self.off:
+            return True
+        if low is not None:
+            return low <= value <= self.high
+        above = value > self.low if self.open_low else value >= self.low
+        return above and value <= self.high  # NaN is neither
+
+    def message(self, key: str, value: float, low: float | None = None, why: str = "") -> str:
+        """``key: expected a number in RANGE[why], got VALUE``."""
+        noun = "integer" if isinstance(value, int) and not isinstance(value, bool) else "number"
+        if self.off is None and low is None and self.low == 0 and not self.min_ticks:
+            kind = f"a positive {noun}" if self.open_low else f"a non-negative {noun}"
+        else:
+            kind = f"an {noun}" if noun == "integer" else f"a {noun}"
+        interval = self.text(low)
+        if self.off is not None:
+            interval = interval.split(" or ", 1)[1]
+            kind = f"{_number(self.off)} (off) or {kind}"
+        return f"{key}: expected {kind} in {interval}{why}, got {value!r}"
+
+    def check(self, key: str, value: float) -> None:
+        """:class:`ConfigError` naming ``key`` and the range unless ``value`` is in it."""
+        if not self.contains(value):
+            raise ConfigError(self.message(key, value))
+
+
+def bounded(
+    default: Any,
+    low: float,
+    high: float,
+    unit: str = "",
+    *,
+    open_low: bool = False,
+    off: float | None = None,
+    min_ticks: float = 0.0,
+) -> Any:
+    """A dataclass field with its default and its documented range (a :class:`Bound`),
+    checked by :func:`check_bounds`, e.g.
+    ``max_force: float = bounded(10.0, 0, 1000, "N", open_low=True)``."""
+    bound = Bound(low, high, unit, open_low or bool(min_ticks and low == 0), off, min_ticks)
+    return dataclasses.field(default=default, metadata={"bound": bound})
+
+
+def bounds(cls: type) -> dict[str, Bound]:
+    """The declared range of each field of dataclass ``cls`` that has one, by field name."""
+    return {
+        f.name: f.metadata["bound"]
+        for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+        if "bound" in f.metadata
+    }
+
+
+def check_bounds(obj: Any, where: str) -> None:
+    """:class:`ConfigError` naming ``where.key`` and its range for the first field of the
+    dataclass ``obj`` outside its declared range."""
+    for name, bound in bounds(type(obj)).items():
+        bound.check(f"{where}.{name}", getattr(obj, name))
+
+
+def check_ticks(obj: Any, where: str, period_s: float, rate: str) -> None:
+    """The lower ends that count sensor ticks (``min_ticks``) of ``obj``'s fields, for a sensor
+    period of ``period_s`` s; ``rate`` names where the period comes from, for the message."""
+    for name, bound in bounds(type(obj)).items():
+        if not bound.min_ticks:
+            continue
+        low = max(bound.low, bound.min_ticks * period_s)
+        value = getattr(obj, name)
+        if not bound.contains(value, low * (1 - 1e-9)):  # 1/30 s written as 0.0333333333
+            ticks = "1 tick" if bound.min_ticks == 1 else f"{_number(bound.min_ticks)} ticks"
+            why = f" (at least {ticks} of {_number(period_s)} s: {rate})"
+            raise ConfigError(bound.message(f"{where}.{name}", value, low, why))
+
+
+# ------------------------------------------------------------------------------ writing TOML
+_ESCAPES = {
+    '"': '\\"',
+    "\\": "\\\\",
+    "\b": "\\b",
+    "\t": "\\t",
+    "\n": "\\n",
+    "\f": "\\f",
+    "\r": "\\r",
+}
+
+
+def _toml_string(text: str) -> str:
+    out = []
+    for char in text:
+        if char in _ESCAPES:
+            out.append(_ESCAPES[char])
+        elif ord(char) < 0x20 or ord(char) == 0x7F:
+            out.append(f"\\u{ord(char):04x}")
+        else:
+            out.append(char)
+    return '"' + "".join(out) + '"'
+
+
+def toml_value(value: Any) -> str:
+    """One TOML value: booleans, integers, floats (``repr``, exact), strings, arrays."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return _toml_string(value)
+    if isinstance(value, (tuple, list)):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {value!r} as TOML")
+
+
+def toml_fields(obj: Any, only_changed: bool = False) -> list[str]:
+    """``key = value`` lines for a dataclass's fields (``None`` ones left out: TOML has no
+    null, and reading the table back gives the default); ``only_changed``: those that differ
+    from the defaults."""
+    default = type(obj)() if only_changed else None
+    return [
+        f"{f.name} = {toml_value(getattr(obj, f.name))}"
+        for f in dataclasses.fields(obj)
+        if getattr(obj, f.name) is not None
+        and not dataclasses.is_dataclass(getattr(obj, f.name))
+        and (default is None or getattr(obj, f.name) != getattr(default, f.name))
+    ]
+
+
+def to_toml(obj: Any, comment: str = "") -> str:
+    """TOML text that :func:`from_table` reads back to ``obj``: its plain fields, then one
+    table per dataclass field."""
+    lines = [f"# {line}" for line in comment.splitlines()] + toml_fields(obj)
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            lines += ["", f"[{f.name}]", *toml_fields(value)]
+    return "\n".join(lines) + "\n"
+
+
 @dataclass(frozen=True)
 class AgentTuning:
     """The gains and limits an agent runs with; the same for every robot of a team.
 
     The defaults are those of the paper's scenario (Sec. VI) and work for the generated ones.
+    Each field declares its range (:func:`bounded`), checked by :meth:`validate` before anything
+    starts; ``kick_force``, ``inertia_force`` and ``push_min_force`` are also at most
+    ``max_force``. The lower ends counted in ticks (``kick_duration_s``, ``settle_window_s``,
+    ``regression_memory_s``) are checked by :meth:`check_period` where the sensor period is
+    known (the scenario's ``sensors.rate_hz``, robot.toml's ``period_s``).
     """
 
-    max_force: float = 10.0
+    max_force: float = bounded(10.0, 0, 1000, "N", open_low=True)
     """N: bound on every commanded force's magnitude (safety)."""
-    filter_gain: float = 5.0
+    filter_gain: float = bounded(5.0, 0, 1000, "1/s", open_low=True)
     """k_f (1/s), the low-pass filters of the Appendix."""
-    regression_memory_s: float = 0.0
-    """s: time constant of the least-squares regressions' forgetting (0 = never forget)."""
-    kick_force: float = 2.0
-    """N: magnitude of the seeded random push that starts Step 1."""
-    kick_duration_s: float = 0.5
-    spin_gain: float = 4.0
+    regression_memory_s: float = bounded(0.0, 0, 3600, "s", off=0.0, min_ticks=10)
+    """s: time constant of the least-squares regressions' forgetting: 0 = never forget, else
+    at least 10 ticks (a shorter memory forgets every sample at once) and at most an hour."""
+    kick_force: float = bounded(2.0, 0, 1000, "N", open_low=True)
+    """N: magnitude of the seeded random push that starts Step 1 (at most ``max_force``)."""
+    kick_duration_s: float = bounded(0.5, 0, 60, "s", min_ticks=1)
+    """s: how long that push lasts (at least a tick: a shorter one would not push at all)."""
+    spin_gain: float = bounded(4.0, 0, 1000, "N s/m", open_low=True)
     """N s/m: gain k of the Step-1 spin-up ``f_i = k Σ_j c(‖ż_ij‖) ż_ij``."""
-    spin_speed: float = 0.5
+    spin_speed: float = bounded(0.5, 0, 10, "m/s", open_low=True)
     """m/s: relative contact speed the Step-1 spin-up settles towards."""
-    inertia_force: float = 2.0
-    """N: largest per-robot force of Step 4 (``f_i = k z_i⊥`` with ``k = F/√w``)."""
-    inertia_min_s: float = 2.0
+    inertia_force: float = bounded(2.0, 0, 1000, "N", open_low=True)
+    """N: largest per-robot force of Step 4 (``f_i = k z_i⊥`` with ``k = F/√w``; at most
+    ``max_force``)."""
+    inertia_min_s: float = bounded(2.0, 0, 600, "s")
     """s: shortest Step 4 (it also spins the load up for Step 5)."""
-    inertia_max_omega: float = 1.0
+    inertia_max_omega: float = bounded(1.0, 0, 10, "rad/s", open_low=True)
     """rad/s: Step 4 brakes when |ω| reaches this and speeds up again below half of it."""
-    push_fbar: float = 1.0
+    push_fbar: float = bounded(1.0, 0, 1000, "rad/s² per m", open_low=True)
     """f̄_y (rad/s² per m) of Steps 5–7: each robot pushes with ``f = f̄_y Ĵ / n`` (Sec. VI) ..."""
-    push_min_force: float = 1.0
+    push_min_force: float = bounded(1.0, 0, 1000, "N", open_low=True)
     """N: ... but at least this much (a compact load's COM would barely accelerate for Step 7),
     and at most ``max_force``."""
     push_direction: tuple[float, float] = (0.0, 1.0)
-    """Direction in ``W`` of the common force ``f`` of Steps 5–7."""
-    observer_gain: float = 2.0
+    """Direction in ``W`` of the common force ``f`` of Steps 5–7: a vector of length in
+    [0.001, 1000] (only its direction counts)."""
+    observer_gain: float = bounded(2.0, 0, 1000, "1/s", open_low=True)
     """k_e of observer (24)."""
-    settle_window_s: float = 1.0
+    settle_window_s: float = bounded(1.0, 0, 60, "s", min_ticks=1)
     """s: an estimate has settled when it moved less than the tolerance over this window."""
-    settle_tolerance: float = 1e-4
+    settle_tolerance: float = bounded(1e-4, 1e-8, 0.1)
     """Relative change that counts as settled."""
-    switch_margin_ticks: int = 10
+    switch_margin_ticks: int = bounded(10, 0, 1000, "ticks")
     """Ticks added to ``n`` between the team agreeing on a phase switch and making it."""
 
+    PUSH_DIRECTION_LENGTH = (0.001, 1000.0)
+    """The range of ``push_direction``'s length."""
+
     def validate(self, where: str) -> None:
-        positive(
-            where,
-            max_force=self.max_force,
-            filter_gain=self.filter_gain,
-            kick_force=self.kick_force,
-            kick_duration_s=self.kick_duration_s,
-            spin_gain=self.spin_gain,
-            spin_speed=self.spin_speed,
-            inertia_force=self.inertia_force,
-            inertia_max_omega=self.inertia_max_omega,
-            push_fbar=self.push_fbar,
-            push_min_force=self.push_min_force,
-            observer_gain=self.observer_gain,
-            settle_window_s=self.settle_window_s,
-            settle_tolerance=self.settle_tolerance,
-        )
+        """:class:`ConfigError` naming the key and its range unless every field is in range
+        (:func:`bounded`), the forces are at most ``max_force`` and ``push_direction``'s length
+        is in [0.001, 1000]."""
+        check_bounds(self, where)
         for key in ("kick_force", "inertia_force", "push_min_force"):
             if getattr(self, key) > self.max_force:
-                raise ConfigError(f"{where}.{key}: must not exceed max_force ({self.max_force})")
-        if math.hypot(*self.push_direction) == 0:
-            raise ConfigError(f"{where}.push_direction: expected a nonzero vector")
-        non_negative(
-            where,
-            inertia_min_s=self.inertia_min_s,
-            regression_memory_s=self.regression_memory_s,
-            switch_margin_ticks=self.switch_margin_ticks,
-        )
+                raise ConfigError(
+                    f"{where}.{key}: expected at most max_force ({self.max_force!r} N),"
+                    f" got {getattr(self, key)!r}"
+                )
+        low, high = self.PUSH_DIRECTION_LENGTH
+        if not low <= math.hypot(*self.push_direction) <= high:
+            raise ConfigError(
+                f"{where}.push_direction: expected a vector of length in [{_number(low)},"
+                f" {_number(high)}], got {list(self.push_direction)!r}"
+            )
+
+    def check_period(self, where: str, period_s: float, rate: str) -> None:
+        """:class:`ConfigError` unless the durations counted in ticks are long enough for a
+        sensor period of ``period_s`` s (``rate`` names where it comes from, for the message)."""
+        check_ticks(self, where, period_s, rate)
 
 
 @dataclass(frozen=True)

@@ -11,14 +11,14 @@ then makes the switch simultaneous:
   (the graph's diameter is below ``n``), before it falls due, so every robot switches at the
   same tick;
 - a robot that hears a neighbour already in a later phase (it missed messages) catches up at
-  once.
+  once. ``halted``, the highest phase, spreads the same way.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
-from agent.protocol import Share
+from agent.protocol import Phase, Share
 
 
 class PhaseBarrier:
@@ -29,18 +29,21 @@ class PhaseBarrier:
         self.n = n
         self.margin = margin
         self.all_ready = (1 << n) - 1
-        self.phase = 0
+        self.phase = Phase.EXCITE
         self.ready = 0
+        """Bitmask of the robots known to be ready to leave ``phase`` (robot ``i`` is bit
+        ``i − 1``)."""
         self.switch_at = -1
+        """The agreed tick of the switch to the next phase (``-1`` while none is agreed)."""
 
     def _enter(self, phase: int) -> None:
-        self.phase = phase
+        self.phase = Phase(phase)
         self.ready = 0
         self.switch_at = -1
 
-    def halt(self, phase: int) -> None:
-        """Jump to the final ``phase`` at once; neighbours catch up with it."""
-        self._enter(phase)
+    def halt(self) -> None:
+        """Jump to ``halted`` at once; neighbours catch up with it."""
+        self._enter(Phase.HALTED)
 
     def step(self, tick: int, own_ready: bool, shares: Iterable[Share]) -> bool:
         """Merge the neighbours' views and our readiness; returns ``True`` if the phase
@@ -50,10 +53,13 @@ class PhaseBarrier:
         latest = max((s.phase for s in shares), default=self.phase)
         if latest > self.phase:
             self._enter(latest)
+        latest_proposal = tick + self.n + self.margin  # no robot can have proposed later
         for s in shares:
             if s.phase == self.phase:
-                self.ready |= s.ready
-                if s.switch_at >= 0 and (self.switch_at < 0 or s.switch_at < self.switch_at):
+                self.ready |= s.ready & self.all_ready  # bits of robots not in the team: none
+                if 0 <= s.switch_at <= latest_proposal and (
+                    self.switch_at < 0 or s.switch_at < self.switch_at
+                ):
                     self.switch_at = s.switch_at
         if own_ready and self.phase == start:
             self.ready |= 1 << (self.robot - 1)

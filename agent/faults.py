@@ -1,8 +1,9 @@
 """Fault injection on the links between agents: message loss and added delay.
 
-These machines have no ``tc netem``, so faults are injected where messages are received: a
-:class:`LinkFaults` decides, with its own seeded random numbers, whether each arriving message
-is dropped, and holds the others for the added delay. What it drops it remembers, so a lockstep
+These machines have no ``tc netem``, so faults are injected where messages are received, by
+:class:`FaultyTransport` around any transport: a :class:`LinkFaults` per robot decides, with
+its own seeded random numbers, whether each arriving message is dropped, and holds the others
+for the added delay. What it drops it remembers, so a lockstep
 run (which otherwise waits for every neighbour's message of the previous tick) knows not to wait
 for a message that will never come.
 """
@@ -76,8 +77,8 @@ class LinkFaults:
 
 
 class FaultyTransport:
-    """Any :class:`~agent.transport.Transport`, with faults applied to what each robot
-    receives (in-process runs and tests; the Zenoh transport applies them itself)."""
+    """Any :class:`~agent.transport.Transport` — in memory or Zenoh — with loss and delay
+    applied to what each robot receives: the one place where faults are injected."""
 
     def __init__(self, inner, settings: FaultSettings, clock=time.monotonic):
         self.inner = inner
@@ -85,14 +86,32 @@ class FaultyTransport:
         self._clock = clock
         self._faults: dict[int, LinkFaults] = {}
 
+    def _links(self, robot: int) -> LinkFaults:
+        faults = self._faults.get(robot)
+        if faults is None:
+            faults = self._faults[robot] = LinkFaults(self.settings, robot)
+        return faults
+
     def send(self, share: Share) -> None:
         self.inner.send(share)
 
     def receive(self, robot: int) -> list[Share]:
-        faults = self._faults.get(robot)
-        if faults is None:
-            faults = self._faults[robot] = LinkFaults(self.settings, robot)
+        faults = self._links(robot)
         now = self._clock()
         for share in self.inner.receive(robot):
             faults.offer(share, now)
         return faults.release(now)
+
+    def dropped(self, robot: int, sender: int, tick: int) -> bool:
+        """Whether ``sender``'s message of ``tick`` to ``robot`` was dropped (lockstep does
+        not wait for it)."""
+        return (sender, tick) in self._links(robot).dropped
+
+    def next_release(self) -> float | None:
+        """When the next delayed message falls due (``None`` if none is held)."""
+        due = [t for f in self._faults.values() if (t := f.next_release()) is not None]
+        return min(due, default=None)
+
+    def forget(self, before_tick: int) -> None:
+        for faults in self._faults.values():
+            faults.forget(before_tick)

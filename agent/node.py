@@ -1,10 +1,12 @@
-"""One robot's agent as a standalone process on Zenoh: ``heft agent --config robot.toml``.
+"""One robot's agent as a standalone process: ``heft agent --config robot.toml``.
 
-The process is the I/O around an :class:`~agent.agent.Agent`: it receives its robot's
-measurements (from the plant or the robot's CAN bridge), its neighbours' shares, and the
-liveliness of its neighbours; it publishes force commands, its share, and now and then its
-estimates and status. It declares a liveliness token so the plant and the neighbours notice
-when it is gone.
+The process is the I/O around an :class:`~agent.agent.Agent`: through its robot port
+(:mod:`agent.robot_io`) it receives its robot's measurements (from the plant or the robot's
+CAN bridge), the team's control messages and the liveliness of its neighbours, and sends force
+commands and, now and then, its estimates and status; through its transport
+(:mod:`agent.transport`, with :mod:`agent.faults` around it) it exchanges shares with its graph
+neighbours. On Zenoh the port declares a liveliness token, so the plant and the neighbours
+notice when the agent is gone.
 
 Clocks:
 
@@ -12,59 +14,96 @@ Clocks:
   of tick ``k − 1`` have arrived (a share the fault injector dropped is not waited for). The
   plant waits for every command, so a run is deterministic: the same as in one process. A
   message the network loses (e.g. one sent before the subscription reached the router) is sent
-  again: an idle agent repeats its latest share, and answers a repeated measurement with its
-  command again.
+  again: an idle agent repeats its latest two shares (a neighbour may be a tick behind), and
+  answers a repeated measurement with its command again. The clock starts at tick 0.
 - ``realtime``: tick ``k`` is stepped as soon as its measurement arrives, with whatever shares
-  are there; a late share is used at a later tick (counted as late).
+  are there; a late share is used at a later tick (counted as late). The clock starts at the
+  first of two consecutive samples.
+
+Either way a measurement stamped more than :data:`TICK_WINDOW` ticks ahead is rejected, never
+adopted as the clock.
 
 A neighbour whose liveliness token disappears (killed, or hung past its lease) is lost: the
-agent halts the team (see :mod:`agent.agent`) and keeps answering with zero force until it is
-told to stop.
+agent halts the team (see :mod:`agent.phase_machine`) and keeps answering with zero force until
+it is told to stop.
 """
 
 from __future__ import annotations
 
 import logging
-import signal
 import threading
 import time
 import tomllib
+from collections import deque
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.agent import DONE, HALTED, PHASES, Agent
-from agent.config import AgentConfig, AgentTuning, ConfigError, from_table
-from agent.faults import FaultSettings
-from agent.protocol import CLOCKS, DecodeError, Keys, Measurement, Status, decode, encode
-from agent.zenoh_session import EventQueue, ZenohSettings, open_session, tick_publisher
+from agent.agent import Agent
+from agent.config import (
+    MAX_ROBOTS,
+    MAX_SEED,
+    AgentConfig,
+    AgentTuning,
+    ConfigError,
+    bounded,
+    check_bounds,
+    from_table,
+)
+from agent.faults import FaultSettings, FaultyTransport
+from agent.process import RejectLog, stop_on_signals
+from agent.protocol import CLOCKS, Command, Control, Keys, Measurement, Phase, Share, Status
+from agent.robot_io import Liveliness, RobotPort
+from agent.zenoh_robot_io import ZenohRobotPort
+from agent.zenoh_session import ZenohSettings, open_session
 from agent.zenoh_transport import ZenohTransport
 
 log = logging.getLogger("heft.agent")
+TICK_WINDOW = 500
+"""A measurement stamped more than this many ticks ahead of the agent's clock is rejected. In
+lockstep the clock starts at 0 (the plant's first tick); in real time at the first of two
+consecutive samples (a robot's ticks count from its own synchronised clock)."""
 RESEND_AFTER_S = 0.2
 """An agent idle this long sends its latest share again (lockstep tolerates lost messages)."""
 
 
 @dataclass(frozen=True)
 class AgentNodeConfig:
-    """A robot's ``robot.toml``: who it is, where its team's Zenoh network is, its limits."""
+    """A robot's ``robot.toml``: who it is, where its team's Zenoh network is, its limits.
+
+    Every value has a range, checked by :meth:`validate` before the agent starts (the
+    tables' own: :class:`~agent.zenoh_session.ZenohSettings`, :class:`~agent.config.AgentTuning`).
+    """
 
     robot: int
+    """This robot's id, in 1..n."""
     n: int
+    """Robots in the team: 2 to :data:`~agent.config.MAX_ROBOTS` (32)."""
     neighbours: tuple[int, ...]
+    """Its graph neighbours: other robots of 1..n, at least one, each once."""
     team: str = "heft"
-    period_s: float = 0.01
-    """Sensor period (s): the plant's or the robot's odometry rate."""
-    seed: int = 1
+    """The first level of every key: non-empty, without / * $ ? #."""
+    period_s: float = bounded(0.01, 0.001, 0.1, "s")
+    """Sensor period (s): the plant's or the robot's odometry rate, 10 Hz to 1 kHz."""
+    seed: int = bounded(1, 0, MAX_SEED)
+    """Seed of the random push that starts Step 1 (mixed with the robot id)."""
     clock: str = "lockstep"
-    report_every: int = 5
+    """``lockstep`` or ``realtime``."""
+    report_every: int = bounded(5, 1, 1000, "ticks")
     """Publish estimates every this many ticks (and every tick once done)."""
     zenoh: ZenohSettings = ZenohSettings()
     faults: FaultSettings = FaultSettings()
+    """Injected message loss and delay (tests): ``drop`` in [0, 1), ``delay_s`` in
+    [0, 10] s."""
     tuning: AgentTuning = AgentTuning()
 
+    MAX_DELAY_S = 10.0
+    """The largest injected delay (s) (``heft run --delay-ms``: at most 10000)."""
+
     def validate(self, where: str) -> None:
-        if self.n < 2:
-            raise ConfigError(f"{where}.n: expected at least 2 robots, got {self.n}")
+        """:class:`ConfigError` naming the key and its range unless every value is in range."""
+        if not 2 <= self.n <= MAX_ROBOTS:
+            raise ConfigError(f"{where}.n: expected 2 to {MAX_ROBOTS} robots, got {self.n}")
         if not 1 <= self.robot <= self.n:
             raise ConfigError(f"{where}.robot: expected 1..{self.n}, got {self.robot}")
         if not self.neighbours:
@@ -76,8 +115,13 @@ class AgentNodeConfig:
             raise ConfigError(f"{where}.neighbours: repeated robot")
         if self.clock not in CLOCKS:
             raise ConfigError(f"{where}.clock: expected lockstep or realtime, got {self.clock!r}")
-        if not self.period_s > 0 or self.report_every < 1:
-            raise ConfigError(f"{where}: period_s must be > 0 and report_every >= 1")
+        check_bounds(self, where)
+        if not self.faults.delay_s <= self.MAX_DELAY_S:
+            raise ConfigError(
+                f"{where}.faults.delay_s: expected a number in [0, {self.MAX_DELAY_S:g}] s,"
+                f" got {self.faults.delay_s!r}"
+            )
+        self.tuning.check_period(f"{where}.tuning", self.period_s, f"period_s = {self.period_s:g}")
         try:
             Keys(self.team)
         except ValueError as err:
@@ -109,105 +153,66 @@ def load_agent_config(path: str | Path) -> AgentNodeConfig:
 
 
 class AgentNode:
-    """The agent process's loop (see the module docstring)."""
+    """The agent process's loop (see the module docstring), on any port and transport."""
 
-    def __init__(self, config: AgentNodeConfig, session, stop: threading.Event | None = None):
+    def __init__(
+        self,
+        config: AgentNodeConfig,
+        port: RobotPort,
+        transport: FaultyTransport,
+        stop: threading.Event | None = None,
+    ):
         self.config = config
-        self.keys = Keys(config.team)
+        self.robot = config.robot
         self.agent = Agent(config.agent_config())
+        self.port = port
+        self.transport = transport
         self.stop = stop or threading.Event()
-        self.events = EventQueue()
         self.measurements: dict[int, Measurement] = {}
         self.shares = []
         self.have: set[tuple[int, int]] = set()
         self.lost: set[int] = set()
-        self.decode_errors = 0
         self.late = 0
         self.next_tick = 0
-        self.last_phase = -1
-        self.last_command: bytes | None = None
-        self.last_share = None
+        self.last_phase: Phase | None = None
+        self.last_command: Command | None = None
+        self.recent_shares: deque[Share] = deque(maxlen=2)
         self.last_sent = time.monotonic()
-        robot, keys = config.robot, self.keys
-        wake = lambda: self.events.put(None)  # noqa: E731
-        self.transport = ZenohTransport(
-            session, keys, robot, config.neighbours, config.faults, wake=wake
-        )
-        self._force = tick_publisher(session, keys.robot(robot, "force"))
-        self._estimate = session.declare_publisher(keys.robot(robot, "estimate"))
-        self._status = session.declare_publisher(keys.robot(robot, "status"))
-        self._subscribers = [
-            session.declare_subscriber(
-                keys.robot(robot, "velocity"),
-                lambda s: self.events.put(("velocity", s.payload.to_bytes())),
-            ),
-            session.declare_subscriber(
-                keys.control, lambda s: self.events.put(("control", s.payload.to_bytes()))
-            ),
-        ]
-        liveliness = session.liveliness()
-        self._token = liveliness.declare_token(keys.robot(robot, "alive"))
-        self._alive_subscribers = [
-            liveliness.declare_subscriber(
-                keys.robot(j, "alive"),
-                lambda s, j=j: self.events.put(("alive", j, str(s.kind))),
-                history=True,
-            )
-            for j in config.neighbours
-        ]
 
     # ------------------------------------------------------------------ events
-    def _handle(self, event) -> None:
-        if event is None:
-            return  # a share arrived; collected when stepping
-        kind = event[0]
-        if kind == "velocity":
-            try:
-                m = decode(Measurement, event[1])
-            except DecodeError as err:
-                self._decode_error("measurement", err)
-                return
-            if m.robot != self.config.robot:
-                self._decode_error("measurement", f"for robot {m.robot}")
-                return
-            if m.tick >= self.next_tick:
-                self.measurements[m.tick] = m
-            elif m.tick == self.next_tick - 1 and self.last_command is not None:
-                self._force.put(self.last_command)  # the plant missed it: it asks again
-        elif kind == "control":
-            try:
-                body = decode("control", event[1])
-            except DecodeError as err:
-                self._decode_error("control", err)
-                return
-            if body.get("command") == "stop":
-                log.info("robot %d: told to stop", self.config.robot)
-                self.stop.set()
-        elif kind == "alive":  # a neighbour's token appeared (nothing to do) or disappeared
-            j, what = event[1], event[2]
-            if "DELETE" in what.upper():
-                if self.agent.phase == DONE or self.stop.is_set():
-                    log.info(
-                        "robot %d: neighbour %d left after the team finished", self.config.robot, j
+    def _handle(self, item) -> None:
+        if isinstance(item, Measurement):
+            waiting = self.config.clock == "realtime" and self.last_command is None
+            if not waiting and item.tick > self.next_tick + TICK_WINDOW:
+                # Not adopted as the new clock: only a clock gone wrong (or a forger) says so.
+                why = "tick out of window"
+                self.port.rejects("measurement", f"tick {item.tick} at tick {self.next_tick}", why)
+            elif item.tick >= self.next_tick:
+                self.measurements[item.tick] = item
+                if waiting and len(self.measurements) > TICK_WINDOW:
+                    latest = max(self.measurements)
+                    del self.measurements[latest]
+                    self.port.rejects(
+                        "measurement", f"tick {latest} before the start", "unconfirmed"
                     )
-                    return
-                if j not in self.lost:
-                    log.warning(
-                        "robot %d: lost neighbour %d; halting the team", self.config.robot, j
-                    )
-                self.lost.add(j)
-                self.agent.halt()
-
-    def _decode_error(self, what: str, err) -> None:
-        self.decode_errors += 1
-        if self.decode_errors <= 10 or self.decode_errors % 1000 == 0:
-            log.warning(
-                "robot %d: undecodable %s #%d: %s", self.config.robot, what, self.decode_errors, err
-            )
+            elif item.tick == self.next_tick - 1 and self.last_command is not None:
+                self.port.send(self.last_command)  # the plant missed it: it asks again
+        elif isinstance(item, Control):
+            log.info("robot %d: told to %s", self.robot, item.command)
+            self.stop.set()
+        elif isinstance(item, Liveliness) and not item.alive:
+            j = item.robot
+            if self.agent.phase == Phase.DONE or self.stop.is_set():
+                log.info("robot %d: neighbour %d left after the team finished", self.robot, j)
+                return
+            if j not in self.lost:
+                log.warning("robot %d: lost neighbour %d; halting the team", self.robot, j)
+            self.lost.add(j)
+            self.agent.halt()
 
     # ------------------------------------------------------------------ stepping
     def _collect_shares(self) -> None:
-        for share in self.transport.receive():
+        for share in self.transport.receive(self.robot):
             self.shares.append(share)
             self.have.add((share.sender, share.tick))
             if share.tick < self.next_tick - 1:
@@ -218,11 +223,10 @@ class AgentNode:
             return False
         if self.config.clock == "realtime" or k == 0:
             return True
-        dropped = self.transport.faults.dropped
         for j in self.config.neighbours:
             if j in self.lost:
                 continue
-            if (j, k - 1) not in self.have and (j, k - 1) not in dropped:
+            if (j, k - 1) not in self.have and not self.transport.dropped(self.robot, j, k - 1):
                 return False
         return True
 
@@ -231,78 +235,103 @@ class AgentNode:
         measurement = self.measurements.pop(k)
         command, share = agent.step(measurement, self.shares)
         self.shares = []
-        self.last_command = encode(command)
-        self._force.put(self.last_command)
+        self.last_command = command
+        self.port.send(command)
         self.transport.send(share)
-        self.last_share = share
+        self.recent_shares.append(share)
         self.last_sent = time.monotonic()
-        if k % self.config.report_every == 0 or agent.phase >= DONE:
-            self._estimate.put(encode(agent.estimates()))
+        if k % self.config.report_every == 0 or agent.phase >= Phase.DONE:
+            self.port.report(agent.estimates())
         if agent.phase != self.last_phase or k % 100 == 0:
             if agent.phase != self.last_phase:
-                log.info("robot %d: tick %d: phase %s", self.config.robot, k, PHASES[agent.phase])
+                log.info("robot %d: tick %d: phase %s", self.robot, k, agent.phase.label)
             self.last_phase = agent.phase
-            self._status.put(encode(self.status(k)))
+            self.port.report(self.status(k))
         self.next_tick = k + 1
         if k % 50 == 0:  # forget what is too old to matter
             forget = k - 50
             self.have = {(j, t) for j, t in self.have if t >= forget}
-            self.transport.faults.forget(forget)
+            self.transport.forget(forget)
             for old in [t for t in self.measurements if t < k]:
                 del self.measurements[old]
 
     def status(self, tick: int) -> Status:
         return Status(
-            robot=self.config.robot,
+            robot=self.robot,
             tick=tick,
-            phase=PHASES[self.agent.phase],
-            rejected=self.agent.rejected + self.transport.foreign,
-            decode_errors=self.decode_errors + self.transport.decode_errors,
+            phase=self.agent.phase,
+            rejected=self.agent.rejected,
+            decode_errors=self.port.rejects.total,
             late=self.late,
             lost_neighbours=tuple(sorted(self.lost)),
         )
+
+    def pump(self, timeout: float) -> None:
+        """Wait up to ``timeout`` for events, then step every tick that can be stepped."""
+        due = self.transport.next_release()
+        if due is not None:
+            timeout = max(0.0, min(timeout, due - time.monotonic()))
+        for _, item in self.port.poll(timeout):
+            self._handle(item)
+        self._collect_shares()
+        if self.config.clock == "realtime" and self.measurements:
+            if self.last_command is None:
+                # The robot's clock is taken from two consecutive samples, not from one message.
+                first = [k for k in self.measurements if k + 1 in self.measurements]
+                if not first:
+                    return
+                self.next_tick = min(first)
+                for k in [k for k in self.measurements if k > self.next_tick + TICK_WINDOW]:
+                    del self.measurements[k]
+                    self.port.rejects("measurement", f"tick {k} at the start", "tick out of window")
+            else:
+                self.next_tick = max(self.next_tick, min(self.measurements))
+        while self._can_step(self.next_tick):
+            self._step(self.next_tick)
+            self._collect_shares()
+        if self.recent_shares and time.monotonic() - self.last_sent > RESEND_AFTER_S:
+            # Idle: a neighbour may be waiting for a share the network lost. Say it again. In
+            # lockstep a neighbour is at most one tick behind: it may need the one before too.
+            for share in self.recent_shares:
+                self.transport.send(share)
+            self.last_sent = time.monotonic()
 
     def run(self) -> int:
         """Run until told to stop; returns the process exit status."""
         log.info(
             "robot %d: up (team %s, neighbours %s, %s clock)",
-            self.config.robot,
+            self.robot,
             self.config.team,
             list(self.config.neighbours),
             self.config.clock,
         )
         while not self.stop.is_set():
-            due = self.transport.next_release()
-            timeout = 0.05 if due is None else max(0.0, min(0.05, due - time.monotonic()))
-            self.events.drain(self._handle, timeout)
-            self._collect_shares()
-            if self.config.clock == "realtime" and self.measurements:
-                self.next_tick = max(self.next_tick, min(self.measurements))
-            while self._can_step(self.next_tick):
-                self._step(self.next_tick)
-                self._collect_shares()
-            if self.last_share is not None and time.monotonic() - self.last_sent > RESEND_AFTER_S:
-                # Idle: a neighbour may be waiting for a share the network lost. Say it again.
-                self.transport.send(self.last_share)
-                self.last_sent = time.monotonic()
-        self._status.put(encode(self.status(self.next_tick - 1)))
-        return 3 if self.agent.phase == HALTED else 0
-
-    def close(self) -> None:
-        self._token.undeclare()
-        for sub in self._subscribers + self._alive_subscribers:
-            sub.undeclare()
-        self.transport.close()
+            self.pump(0.05)
+        self.port.report(self.status(self.next_tick - 1))
+        return 3 if self.agent.phase == Phase.HALTED else 0
 
 
-def run_agent(config: AgentNodeConfig) -> int:
-    """Open the session, run the node until stopped (control message, SIGINT or SIGTERM)."""
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    with open_session(config.zenoh) as session:
-        node = AgentNode(config, session, stop)
-        try:
-            return node.run()
-        finally:
-            node.close()
+@contextmanager
+def zenoh_agent_node(config: AgentNodeConfig, session, stop: threading.Event | None = None):
+    """The agent node of ``config`` on an open Zenoh session (its port and transport are
+    closed on leaving the ``with`` block)."""
+    keys = Keys(config.team)
+    rejects = RejectLog(log, f"robot {config.robot}")
+    port = ZenohRobotPort(session, keys, config.robot, config.neighbours, rejects)
+    shares = ZenohTransport(session, keys, config.robot, config.neighbours, rejects, port.wake)
+    # Alive only once every subscription is in place: the plant starts the run on it, and a
+    # share sent before its subscription reached the router is lost.
+    port.declare_alive()
+    try:
+        yield AgentNode(config, port, FaultyTransport(shares, config.faults), stop)
+    finally:
+        shares.close()
+        port.close()
+
+
+def run_agent(config: AgentNodeConfig, stop: threading.Event | None = None) -> int:
+    """Run the agent of ``config`` on Zenoh until stopped (a control message, or SIGINT,
+    SIGTERM or SIGHUP)."""
+    stop = stop or stop_on_signals()
+    with open_session(config.zenoh) as session, zenoh_agent_node(config, session, stop) as node:
+        return node.run()

@@ -2,26 +2,63 @@
 
 Every message that crosses a process or a machine is defined here, and nowhere else:
 
-- :class:`Measurement` — what a robot senses at one sensor tick (plant or AGV → agent),
+- :class:`Measurement` — what a robot senses at one sensor tick (plant or AGV bridge → agent),
 - :class:`Command` — the force the agent asks its robot to apply until the next tick
-  (agent → plant or AGV),
+  (agent → plant or AGV bridge),
 - :class:`Share` — what an agent tells its graph neighbours each tick (agent → neighbours),
-- :class:`Estimates` — the agent's current estimates, for logs, results and displays.
+- :class:`Estimates` and :class:`Status` — an agent's estimates and health (agent → launcher,
+  displays),
+- :class:`Clock`, :class:`Truth` and :class:`PlantStatus` — the simulated plant's tick, its
+  ground truth (evaluation only: no agent subscribes to it) and its counters,
+- :class:`BridgeStatus` — an AGV bridge's health,
+- :class:`Control` — what the launcher tells every process of a team (stop).
 
 All vectors are planar, ``(x, y)`` tuples in SI units, in the common world frame ``W`` of the
 paper (Sec. II). Robot ids are ``1..n``. A *tick* is the index of a sensor sample; every robot's
 sample ``k`` is taken at the same instant ``t_k`` (the robots' clocks are synchronised), and a
 message stamped ``k`` was produced after sample ``k`` and before sample ``k + 1``.
+
+This module imports nothing of the project but the typed-table reader :mod:`agent.config` and
+``Vec2``, and
+no third-party package: a bridge or a display reads the team's messages without the plant, the
+estimator or a plotting library.
 """
 
 from __future__ import annotations
 
+import dataclasses as _dataclasses
 import json as _json
 import math as _math
 import struct as _struct
 from dataclasses import dataclass, field
+from enum import IntEnum
 
-Vec2 = tuple[float, float]
+from agent.config import ConfigError, from_table
+from agent.estimation.geometry import Vec2
+
+
+class Phase(IntEnum):
+    """The team's force regime (see :mod:`agent.phase_machine`); later phases compare greater.
+
+    ======== =========================================================================
+    excite    kick, then the geometry-free spin-up: Steps 1-3 and ``w`` settle
+    inertia   ``f_i = ±k z_i⊥`` (eq. 14): Step 4 settles
+    push      a common ``f`` (eq. 17): Steps 5-7 settle
+    done      zero force: the load coasts
+    halted    zero force: a robot was lost, the team stopped
+    ======== =========================================================================
+    """
+
+    EXCITE = 0
+    INERTIA = 1
+    PUSH = 2
+    DONE = 3
+    HALTED = 4
+
+    @property
+    def label(self) -> str:
+        """The phase's name as logs, tables and JSON write it (``"excite"``)."""
+        return self.name.lower()
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,7 +107,7 @@ class Share:
     degree: int
     centroid: Vec2 | None = None
     spread: float = 0.0
-    phase: int = 0
+    phase: Phase = Phase.EXCITE
     ready: int = 0
     switch_at: int = -1
     flows: tuple[tuple[int, float, float, float], ...] = ()
@@ -86,13 +123,15 @@ class Estimates:
     ``z_C = p_G - p_C``; ``contact_to_com`` is ``p_C - p_Ci = -(z_i + z_C)``.
     ``spread`` is ``w = Σ_i ‖z_i‖²`` as the robot knows it by consensus (eq. 16).
     ``com_observer`` is observer (24)'s ``ẑ_C`` (run beside the team's estimate).
-    ``started`` maps a paper step (1..7) to the tick at which the robot began it, ``settled`` to
-    the tick at which its estimate first settled.
+    ``phase_since`` is the tick at which the robot entered ``phase`` (the team's agreed switch
+    tick, unless the robot caught up late). ``started`` maps a paper step (1..7) to the tick at
+    which the robot began it, ``settled`` to the tick at which its estimate first settled.
     """
 
     robot: int
     tick: int
-    phase: str
+    phase: Phase
+    phase_since: int = 0
     omega: float | None = None
     relative_positions: dict[int, Vec2] = field(default_factory=dict)
     centroid_offset: Vec2 | None = None
@@ -107,69 +146,17 @@ class Estimates:
     settled: dict[int, int] = field(default_factory=dict)
 
 
-# ====================================================================== on the wire
-# Key expressions: every process of one team lives under ``heft/<team>/``.
-#
-#   heft/<team>/robot/<id>/velocity   Measurement   plant or AGV bridge → agent <id>
-#   heft/<team>/robot/<id>/force      Command       agent <id> → plant or AGV bridge
-#   heft/<team>/robot/<id>/share      Share         agent <id> → its graph neighbours
-#   heft/<team>/robot/<id>/estimate   Estimates     agent <id> → launcher, displays
-#   heft/<team>/robot/<id>/status     Status        agent <id> → launcher, displays
-#   heft/<team>/robot/<id>/alive      (liveliness token of agent <id>)
-#   heft/<team>/plant/clock           Clock         plant → everyone (lockstep and real time)
-#   heft/<team>/plant/truth           Truth         plant → launcher, displays (evaluation only)
-#   heft/<team>/plant/status          plant_status  plant → launcher (counters, latencies)
-#   heft/<team>/control               Control       launcher → everyone (stop)
-#
-# Payloads start with a 3-byte header: magic ``b"H"``, :data:`WIRE_VERSION`, and a kind byte.
-# The per-tick messages (measurement, command, share, clock) are packed with :mod:`struct`
-# (little-endian, fixed size); the occasional ones (estimate, status, truth, control) are UTF-8
-# JSON. :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count
-# and log those, never crash on them.
+@dataclass(frozen=True, slots=True)
+class Status:
+    """How an agent is doing: for logs, the launcher and displays."""
 
-WIRE_VERSION = 1
-CLOCKS = ("lockstep", "realtime")
-"""How the plant and the agents keep time (see :mod:`agent.node` and :mod:`simulator.node`)."""
-_MAGIC = 0x48
-_HEADER = _struct.Struct("<BBB")
-
-
-class DecodeError(ValueError):
-    """A payload that is not a valid message of the expected kind and version."""
-
-
-class Keys:
-    """The key expressions of one team."""
-
-    def __init__(self, team: str):
-        if not team or any(c in team for c in "/*$?#"):
-            raise ValueError(f"team name {team!r} must be non-empty without / * $ ? #")
-        self.team = team
-        self.root = f"heft/{team}"
-
-    def robot(self, robot: int, topic: str) -> str:
-        """``heft/<team>/robot/<id>/<topic>``; ``robot=0`` gives the wildcard ``*``."""
-        return f"{self.root}/robot/{robot if robot else '*'}/{topic}"
-
-    def plant(self, topic: str) -> str:
-        return f"{self.root}/plant/{topic}"
-
-    @property
-    def control(self) -> str:
-        return f"{self.root}/control"
-
-    @staticmethod
-    def robot_of(key: str) -> int:
-        """The robot id in a ``heft/<team>/robot/<id>/…`` key (``DecodeError`` if none)."""
-        parts = key.split("/")
-        if (
-            len(parts) < 4
-            or parts[0] != "heft"
-            or parts[2] != "robot"
-            or not (parts[3].isascii() and parts[3].isdigit())
-        ):
-            raise DecodeError(f"no robot id in key {key!r}")
-        return int(parts[3])
+    robot: int
+    tick: int
+    phase: Phase
+    rejected: int = 0
+    decode_errors: int = 0
+    late: int = 0
+    lost_neighbours: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,35 +168,274 @@ class Clock:
 
 
 @dataclass(frozen=True, slots=True)
-class Status:
-    """How an agent is doing: for logs, the launcher and displays."""
+class Truth:
+    """The load's ground truth at ``tick`` (vectors in ``W``). For evaluation and display
+    only: never given to agents."""
+
+    tick: int
+    time_s: float
+    com_position: Vec2
+    """``p_C``."""
+    angle: float
+    """Angle of the load frame in ``W`` (rad)."""
+    com_velocity: Vec2
+    """``ṗ_C``."""
+    omega: float
+    """``ω``."""
+    contacts: tuple[Vec2, ...]
+    """``p_Ci``, robot ``1..n`` order."""
+    contact_velocities: tuple[Vec2, ...]
+    """``ṗ_Ci``."""
+    contact_to_com: tuple[Vec2, ...]
+    """``p_C - p_Ci``."""
+    mass: float
+    moment: float
+    """Moment of inertia about the COM."""
+
+    @property
+    def centroid(self) -> Vec2:
+        """``p_G``, the centroid of the contact points."""
+        n = len(self.contacts)
+        return (
+            _math.fsum(p[0] for p in self.contacts) / n,
+            _math.fsum(p[1] for p in self.contacts) / n,
+        )
+
+    @property
+    def centroid_offsets(self) -> tuple[Vec2, ...]:
+        """``z_i = p_Ci - p_G``."""
+        gx, gy = self.centroid
+        return tuple((x - gx, y - gy) for x, y in self.contacts)
+
+    @property
+    def com_offset(self) -> Vec2:
+        """``z_C = p_G - p_C``."""
+        gx, gy = self.centroid
+        return (gx - self.com_position[0], gy - self.com_position[1])
+
+
+@dataclass(frozen=True, slots=True)
+class PlantStatus:
+    """The simulated plant's counters; latencies (ms, from publishing a tick to receiving a
+    command for it) are ``None`` before any was measured."""
+
+    tick: int
+    time_s: float
+    clock: str
+    late_commands: int = 0
+    missing_commands: int = 0
+    overruns: int = 0
+    resent: int = 0
+    decode_errors: int = 0
+    lost: tuple[int, ...] = ()
+    latency_ms_p50: float | None = None
+    latency_ms_p99: float | None = None
+    latency_ms_mean: float | None = None
+    latency_samples: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class BridgeStatus:
+    """An AGV bridge's health: frames each way, decode errors, and its command watchdog
+    (``watchdog`` true while it commands zero force because the agent fell silent)."""
 
     robot: int
     tick: int
-    phase: str
-    rejected: int = 0
+    watchdog: bool = False
+    watchdog_trips: int = 0
+    frames_in: int = 0
+    frames_out: int = 0
+    missed_ticks: int = 0
     decode_errors: int = 0
-    late: int = 0
-    lost_neighbours: tuple[int, ...] = ()
 
 
-# kind byte → (type, struct of the body)
+@dataclass(frozen=True, slots=True)
+class Control:
+    """An order to every process of a team; ``stop`` is the only one."""
+
+    command: str = "stop"
+
+
+CONTROL_COMMANDS = ("stop",)
+CLOCKS = ("lockstep", "realtime")
+"""How the plant and the agents keep time (see :mod:`agent.node` and :mod:`simulator.node`)."""
+
+
+# ====================================================================== key expressions
+class Keys:
+    """The key expressions of one team: every process of a team lives under ``heft/<team>/``.
+
+    ==================================== ================ ===================================
+    key                                   message          from → to
+    ==================================== ================ ===================================
+    ``heft/<team>/robot/<id>/velocity``   Measurement      plant or AGV bridge → agent
+    ``heft/<team>/robot/<id>/force``      Command          agent → plant or AGV bridge
+    ``heft/<team>/robot/<id>/share``      Share            agent → its graph neighbours
+    ``heft/<team>/robot/<id>/estimate``   Estimates        agent → launcher, displays
+    ``heft/<team>/robot/<id>/status``     Status           agent → launcher, displays
+    ``heft/<team>/robot/<id>/bridge``     BridgeStatus     AGV bridge → launcher, displays
+    ``heft/<team>/robot/<id>/alive``      (liveliness)     agent
+    ``heft/<team>/plant/clock``           Clock            plant → everyone
+    ``heft/<team>/plant/truth``           Truth            plant → launcher, displays
+    ``heft/<team>/plant/status``          PlantStatus      plant → launcher, displays
+    ``heft/<team>/control``               Control          launcher → everyone
+    ==================================== ================ ===================================
+
+    A method per key takes the robot id; its ``all_…`` twin is the wildcard a subscriber to
+    every robot of the team uses.
+    """
+
+    def __init__(self, team: str):
+        if not team or any(c in team for c in "/*$?#"):
+            raise ValueError(f"team name {team!r} must be non-empty without / * $ ? #")
+        self.team = team
+        self.root = f"heft/{team}"
+
+    def _robot(self, robot: int, topic: str) -> str:
+        if isinstance(robot, bool) or not isinstance(robot, int) or robot < 1:
+            raise ValueError(f"robot ids are integers >= 1, got {robot!r}")
+        return f"{self.root}/robot/{robot}/{topic}"
+
+    def velocity(self, robot: int) -> str:
+        return self._robot(robot, "velocity")
+
+    def force(self, robot: int) -> str:
+        return self._robot(robot, "force")
+
+    def share(self, robot: int) -> str:
+        return self._robot(robot, "share")
+
+    def estimate(self, robot: int) -> str:
+        return self._robot(robot, "estimate")
+
+    def status(self, robot: int) -> str:
+        return self._robot(robot, "status")
+
+    def bridge(self, robot: int) -> str:
+        return self._robot(robot, "bridge")
+
+    def alive(self, robot: int) -> str:
+        return self._robot(robot, "alive")
+
+    def all_forces(self) -> str:
+        return f"{self.root}/robot/*/force"
+
+    def all_estimates(self) -> str:
+        return f"{self.root}/robot/*/estimate"
+
+    def all_statuses(self) -> str:
+        return f"{self.root}/robot/*/status"
+
+    def all_bridges(self) -> str:
+        return f"{self.root}/robot/*/bridge"
+
+    def all_alive(self) -> str:
+        return f"{self.root}/robot/*/alive"
+
+    def clock(self) -> str:
+        return f"{self.root}/plant/clock"
+
+    def truth(self) -> str:
+        return f"{self.root}/plant/truth"
+
+    def plant_status(self) -> str:
+        return f"{self.root}/plant/status"
+
+    def control(self) -> str:
+        return f"{self.root}/control"
+
+    def of(self, message: object) -> str:
+        """The key ``message`` is published on."""
+        if isinstance(message, Measurement):
+            return self.velocity(message.robot)
+        if isinstance(message, Command):
+            return self.force(message.robot)
+        if isinstance(message, Share):
+            return self.share(message.sender)
+        if isinstance(message, Estimates):
+            return self.estimate(message.robot)
+        if isinstance(message, Status):
+            return self.status(message.robot)
+        if isinstance(message, BridgeStatus):
+            return self.bridge(message.robot)
+        if isinstance(message, Clock):
+            return self.clock()
+        if isinstance(message, Truth):
+            return self.truth()
+        if isinstance(message, PlantStatus):
+            return self.plant_status()
+        if isinstance(message, Control):
+            return self.control()
+        raise TypeError(f"not a protocol message: {type(message).__name__}")
+
+    @staticmethod
+    def robot_of(key: str) -> int:
+        """The robot id in a ``heft/<team>/robot/<id>/…`` key (``DecodeError`` if none)."""
+        parts = key.split("/")
+        if (
+            len(parts) < 4
+            or parts[0] != "heft"
+            or parts[2] != "robot"
+            or not (parts[3].isascii() and parts[3].isdigit() and len(parts[3]) < 10)
+        ):
+            raise DecodeError(f"no robot id in key {key!r}")
+        return int(parts[3])
+
+
+# ====================================================================== on the wire
+# Payloads start with a 3-byte header: magic ``b"H"``, :data:`WIRE_VERSION`, and a kind byte.
+# The per-tick messages (measurement, command, share, clock) are packed with :mod:`struct`
+# (little-endian, fixed size); the occasional ones are UTF-8 JSON objects with every field of
+# the dataclass (pairs as arrays, phases by name). :func:`decode` checks everything it can and
+# raises :class:`DecodeError` — callers count and log those, never crash on them.
+
+WIRE_VERSION = 2
+_MAGIC = 0x48
+_HEADER = _struct.Struct("<BBB")
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected kind and version."""
+
+
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
 _SHARE = _struct.Struct("<Hq2dHB2ddBQqqB")
 _FLOW = _struct.Struct("<H3d")
 _CLOCK = _struct.Struct("<qd")
-_KIND = {Measurement: 1, Command: 2, Share: 3, Clock: 4, Estimates: 5, Status: 6}
-_JSON_KINDS = {7: "truth", 8: "control", 9: "plant_status"}
+KINDS: dict[type, int] = {
+    Measurement: 1,
+    Command: 2,
+    Share: 3,
+    Clock: 4,
+    Estimates: 5,
+    Status: 6,
+    Truth: 7,
+    Control: 8,
+    PlantStatus: 9,
+    BridgeStatus: 10,
+}
+"""Every message class and its kind byte."""
+_STRUCT_KINDS = (Measurement, Command, Share, Clock)
 
 
 def _finite(*values: float) -> bool:
     return all(_math.isfinite(v) for v in values)
 
 
+def _json_value(value):
+    if isinstance(value, Phase):
+        return value.label
+    if isinstance(value, dict):
+        return {str(k): _json_value(v) for k, v in value.items()}
+    if isinstance(value, (tuple, list)):
+        return [_json_value(v) for v in value]
+    return value
+
+
 def encode(message: object) -> bytes:
     """The wire form of a protocol message."""
-    kind = _KIND.get(type(message))
+    kind = KINDS.get(type(message))
     if kind is None:
         raise TypeError(f"not a protocol message: {type(message).__name__}")
     head = _HEADER.pack(_MAGIC, WIRE_VERSION, kind)
@@ -239,22 +465,8 @@ def encode(message: object) -> bytes:
         return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
     if kind == 4:
         return head + _CLOCK.pack(m.tick, m.time_s)
-    body = {k: getattr(m, k) for k in m.__dataclass_fields__}
-    if kind == 5:
-        body["relative_positions"] = {str(j): v for j, v in m.relative_positions.items()}
-        body["started"] = {str(s): t for s, t in m.started.items()}
-        body["settled"] = {str(s): t for s, t in m.settled.items()}
+    body = {f.name: _json_value(getattr(m, f.name)) for f in _dataclasses.fields(m)}
     return head + _json.dumps(body, allow_nan=False, separators=(",", ":")).encode()
-
-
-def encode_json(kind: str, body: dict) -> bytes:
-    """The wire form of a JSON message of ``kind`` ``"truth"``, ``"control"`` or
-    ``"plant_status"``."""
-    code = {v: k for k, v in _JSON_KINDS.items()}[kind]
-    return (
-        _HEADER.pack(_MAGIC, WIRE_VERSION, code)
-        + _json.dumps(body, allow_nan=False, separators=(",", ":")).encode()
-    )
 
 
 def _check_header(payload: bytes, expected: int) -> memoryview:
@@ -283,98 +495,173 @@ def _no_constants(name: str):
     raise ValueError(f"{name} is not a number this protocol accepts")
 
 
-def _json_body(body: memoryview, name: str) -> dict:
+def _json_message(cls: type, body: memoryview):
+    name = cls.__name__
     try:
         data = _json.loads(bytes(body), parse_constant=_no_constants)
     except (UnicodeDecodeError, ValueError, RecursionError) as err:
         raise DecodeError(f"{name}: not JSON ({type(err).__name__}: {err})") from None
     if not isinstance(data, dict):
         raise DecodeError(f"{name}: expected a JSON object")
-    return data
+    expected = {f.name for f in _dataclasses.fields(cls)}
+    if set(data) != expected:
+        raise DecodeError(f"{name}: keys {sorted(data)} are not those of {name}")
+    try:
+        return from_table(cls, data, name)
+    except (ConfigError, RecursionError) as err:
+        raise DecodeError(str(err)) from None
 
 
-def _is_int(v) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
+# ====================================================================== domains
+# A message that decodes is still checked field by field before it reaches an estimator, the
+# plant or a display: ids, ticks and phases within their domains, vectors within physical
+# bounds (generous: they reject garbage and clocks gone wrong, not unusual runs). What a
+# receiver alone can check — a robot id within its team, a tick near its own clock — it checks
+# itself (see :mod:`agent.node`, :mod:`simulator.node`).
+
+MAX_ROBOT_ID = 0xFFFF
+MAX_TICK = 2**40
+"""About 35 years of ticks at 1 kHz."""
+MAX_TIME_S = 1e9
+MAX_SPEED = 500.0
+"""m/s, a contact point's velocity."""
+MAX_FORCE = 10_000.0
+"""N, a commanded or measured force."""
+MAX_DISTANCE = 10_000.0
+"""m, a position or offset shared between agents."""
+MAX_FLOW = 1e9
+"""What has flowed on an edge of the consensus iterations (m and m²)."""
 
 
-def _is_number(v) -> bool:
-    return (isinstance(v, (int, float)) and not isinstance(v, bool)) and _math.isfinite(v)
+def _within(name: str, value: float, low: float, high: float) -> None:
+    if not low <= value <= high:
+        raise DecodeError(f"{name} = {value!r} is outside [{low:g}, {high:g}]")
 
 
-def _is_pair(v) -> bool:
-    return isinstance(v, list) and len(v) == 2 and all(_is_number(x) for x in v)
+def _bounded(name: str, v: tuple[float, float], bound: float) -> None:
+    if _math.hypot(v[0], v[1]) > bound:
+        raise DecodeError(f"{name} = {v!r} is longer than {bound:g}")
 
 
-def _check(ok: bool, name: str, key: str) -> None:
-    if not ok:
-        raise DecodeError(f"{name}: {key} has the wrong type")
+def _robot_id(name: str, value: int) -> None:
+    _within(name, value, 1, MAX_ROBOT_ID)
 
 
-def _int_keys(d, name: str, key: str, value_ok) -> dict:
-    _check(isinstance(d, dict), name, key)
-    out = {}
-    for k, v in d.items():
-        _check(k.isascii() and k.isdigit() and value_ok(v), name, key)
-        out[int(k)] = tuple(v) if isinstance(v, list) else v
-    return out
+def _measurement(m: Measurement) -> None:
+    _robot_id("measurement.robot", m.robot)
+    _within("measurement.tick", m.tick, 0, MAX_TICK)
+    _within("measurement.time_s", m.time_s, 0.0, MAX_TIME_S)
+    _bounded("measurement.velocity", m.velocity, MAX_SPEED)
+    _bounded("measurement.force", m.force, MAX_FORCE)
 
 
-_ESTIMATE_NUMBERS = ("omega", "spread", "moment", "mass")
-_ESTIMATE_PAIRS = (
-    "centroid_offset",
-    "com_offset",
-    "com_observer",
-    "com_velocity",
-    "contact_to_com",
-)
+def _command(m: Command) -> None:
+    _robot_id("command.robot", m.robot)
+    _within("command.tick", m.tick, 0, MAX_TICK)
+    _bounded("command.force", m.force, MAX_FORCE)
 
 
-def _estimates(data: dict) -> Estimates:
-    name = "estimates"
-    if set(data) != set(Estimates.__dataclass_fields__):
-        raise DecodeError(f"{name}: keys {sorted(data)} are not those of estimates")
-    _check(_is_int(data["robot"]) and _is_int(data["tick"]), name, "robot/tick")
-    _check(isinstance(data["phase"], str), name, "phase")
-    for key in _ESTIMATE_NUMBERS:
-        _check(data[key] is None or _is_number(data[key]), name, key)
-    for key in _ESTIMATE_PAIRS:
-        _check(data[key] is None or _is_pair(data[key]), name, key)
-        if data[key] is not None:
-            data[key] = tuple(data[key])
-    data["relative_positions"] = _int_keys(
-        data["relative_positions"], name, "relative_positions", _is_pair
-    )
-    data["started"] = _int_keys(data["started"], name, "started", _is_int)
-    data["settled"] = _int_keys(data["settled"], name, "settled", _is_int)
-    return Estimates(**data)
+def _share(m: Share) -> None:
+    _robot_id("share.sender", m.sender)
+    _within("share.tick", m.tick, 0, MAX_TICK)
+    _bounded("share.velocity", m.velocity, MAX_SPEED)
+    _within("share.degree", m.degree, 1, MAX_ROBOT_ID)
+    if m.centroid is not None:
+        _bounded("share.centroid", m.centroid, MAX_DISTANCE)
+    _within("share.spread", m.spread, -(MAX_DISTANCE**2), MAX_DISTANCE**2)
+    _within("share.switch_at", m.switch_at, -1, MAX_TICK)
+    _within("share.instant", m.instant, -1, m.tick - 1)
+    _within("share.flows (how many)", len(m.flows), 0, m.degree)
+    for j, fx, fy, fs in m.flows:
+        _robot_id("share.flows.robot", j)
+        _bounded("share.flows", (fx, fy), MAX_FLOW)
+        _within("share.flows", fs, -MAX_FLOW, MAX_FLOW)
 
 
-def _status(data: dict) -> Status:
-    name = "status"
-    known = set(Status.__dataclass_fields__)
-    if not {"robot", "tick", "phase"} <= set(data) <= known:
-        raise DecodeError(f"{name}: keys {sorted(data)} are not those of status")
-    for key in ("rejected", "decode_errors", "late"):
-        data.setdefault(key, 0)
-    data.setdefault("lost_neighbours", [])
-    for key in ("robot", "tick", "rejected", "decode_errors", "late"):
-        _check(_is_int(data[key]), name, key)
-    _check(isinstance(data["phase"], str), name, "phase")
-    lost = data["lost_neighbours"]
-    _check(isinstance(lost, list) and all(_is_int(j) for j in lost), name, "lost_neighbours")
-    data["lost_neighbours"] = tuple(lost)
-    return Status(**data)
+def _clock(m: Clock) -> None:
+    _within("clock.tick", m.tick, 0, MAX_TICK)
+    _within("clock.time_s", m.time_s, 0.0, MAX_TIME_S)
 
 
-def decode(kind: type | str, payload: bytes):
-    """Decode ``payload`` as a message of ``kind`` (a message class, or ``"truth"`` /
-    ``"control"`` for the JSON dictionaries); :class:`DecodeError` if it is not one."""
-    if isinstance(kind, str):
-        code = {v: k for k, v in _JSON_KINDS.items()}.get(kind)
-        if code is None:
-            raise ValueError(f"unknown message kind {kind!r}")
-        return _json_body(_check_header(payload, code), kind)
-    code = _KIND[kind]
+def _estimates(m: Estimates) -> None:
+    """Telemetry: ids and ticks; values only finite (early estimates may be far off)."""
+    _robot_id("estimates.robot", m.robot)
+    _within("estimates.tick", m.tick, -1, MAX_TICK)
+    _within("estimates.phase_since", m.phase_since, 0, MAX_TICK)
+    for j in m.relative_positions:
+        _robot_id("estimates.relative_positions", j)
+    for step in (*m.started, *m.settled):
+        _within("estimates step", step, 1, 7)
+
+
+def _status(m: Status) -> None:
+    _robot_id("status.robot", m.robot)
+    _within("status.tick", m.tick, -1, MAX_TICK)
+    for j in m.lost_neighbours:
+        _robot_id("status.lost_neighbours", j)
+
+
+def _truth(m: Truth) -> None:
+    _within("truth.tick", m.tick, 0, MAX_TICK)
+    _within("truth.time_s", m.time_s, 0.0, MAX_TIME_S)
+    if not len(m.contacts) == len(m.contact_velocities) == len(m.contact_to_com) >= 1:
+        raise DecodeError("truth: contacts, contact_velocities, contact_to_com differ in length")
+    if not (m.mass > 0 and m.moment > 0):
+        raise DecodeError("truth: mass and moment must be positive")
+
+
+def _plant_status(m: PlantStatus) -> None:
+    _within("plant_status.tick", m.tick, 0, MAX_TICK)
+    if m.clock not in CLOCKS:
+        raise DecodeError(f"plant_status.clock {m.clock!r} is not one of {CLOCKS}")
+    for j in m.lost:
+        _robot_id("plant_status.lost", j)
+
+
+def _bridge_status(m: BridgeStatus) -> None:
+    _robot_id("bridge_status.robot", m.robot)
+    _within("bridge_status.tick", m.tick, -1, MAX_TICK)
+
+
+def _control(m: Control) -> None:
+    if m.command not in CONTROL_COMMANDS:
+        raise DecodeError(f"control.command {m.command!r} is not one of {CONTROL_COMMANDS}")
+
+
+DOMAINS = {
+    Measurement: _measurement,
+    Command: _command,
+    Share: _share,
+    Clock: _clock,
+    Estimates: _estimates,
+    Status: _status,
+    Truth: _truth,
+    PlantStatus: _plant_status,
+    BridgeStatus: _bridge_status,
+    Control: _control,
+}
+"""Each message class's domain check: raises :class:`DecodeError` naming the field."""
+
+
+def _phase(value: int, name: str) -> Phase:
+    try:
+        return Phase(value)
+    except ValueError:
+        raise DecodeError(f"{name}: phase {value} is not one of 0..{max(Phase)}") from None
+
+
+def decode(kind: type, payload: bytes):
+    """Decode ``payload`` as a message of class ``kind`` and check every field's domain;
+    :class:`DecodeError` if it is not one."""
+    message = _decode(kind, payload)
+    DOMAINS[kind](message)
+    return message
+
+
+def _decode(kind: type, payload: bytes):
+    code = KINDS.get(kind)
+    if code is None:
+        raise TypeError(f"not a protocol message class: {kind!r}")
     body = _check_header(payload, code)
     if kind is Measurement:
         r, t, ts, vx, vy, fx, fy = _unpack(_MEASUREMENT, body, "measurement")
@@ -401,7 +688,7 @@ def decode(kind: type | str, payload: bytes):
             deg,
             (cx, cy) if has else None,
             spread,
-            phase,
+            _phase(phase, "share"),
             ready,
             switch_at,
             flows,
@@ -409,5 +696,4 @@ def decode(kind: type | str, payload: bytes):
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))
-    data = _json_body(body, kind.__name__.lower())
-    return _estimates(data) if kind is Estimates else _status(data)
+    return _json_message(kind, body)

@@ -10,6 +10,7 @@ the tick after its stamp, so results do not depend on them.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterable
 from typing import Protocol
 
@@ -34,19 +35,27 @@ def neighbour_map(n: int, edges: Iterable[tuple[int, int]]) -> dict[int, tuple[i
 
 
 class InMemoryTransport:
-    """Delivers each message at once into its recipients' inboxes (one process)."""
+    """Delivers each message at once into its recipients' inboxes (one process; safe for
+    agents on several threads). ``wake(robot)``, if given, is called for each delivery."""
 
-    def __init__(self, n: int, edges: Iterable[tuple[int, int]]):
+    def __init__(self, n: int, edges: Iterable[tuple[int, int]], wake=None):
         self.neighbours = neighbour_map(n, edges)
         self._inbox: dict[int, list[Share]] = {i: [] for i in self.neighbours}
+        self._lock = threading.Lock()
+        self._wake = wake
         self.delivered = 0
 
     def send(self, share: Share) -> None:
-        for j in self.neighbours[share.sender]:
-            self._inbox[j].append(share)
-            self.delivered += 1
+        with self._lock:
+            for j in self.neighbours[share.sender]:
+                self._inbox[j].append(share)
+                self.delivered += 1
+        if self._wake is not None:
+            for j in self.neighbours[share.sender]:
+                self._wake(j)
 
     def receive(self, robot: int) -> list[Share]:
-        inbox = self._inbox[robot]
-        self._inbox[robot] = []
+        with self._lock:
+            inbox = self._inbox[robot]
+            self._inbox[robot] = []
         return inbox

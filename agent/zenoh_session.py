@@ -9,11 +9,11 @@ not up yet instead of failing at once.
 from __future__ import annotations
 
 import json
-import queue
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
-from agent.config import ConfigError
+from agent.config import ConfigError, bounded, check_bounds
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:/\s]+:\d{1,5}$")
@@ -26,35 +26,63 @@ class ZenohSettings:
     mode: str = "client"
     """``client`` (through a router), ``peer`` or ``router``."""
     connect: tuple[str, ...] = (DEFAULT_ROUTER,)
+    """Endpoints to connect to, each explicit: ``tcp/HOST:PORT`` (or ``udp``, ``quic``,
+    ``tls``), port 1 to 65535; a client needs at least one."""
     listen: tuple[str, ...] = ()
-    lease_ms: int = 2000
+    """Endpoints to listen on, as ``connect``; a router needs at least one."""
+    lease_ms: int = bounded(2000, 100, 60_000, "ms")
     """How soon the others notice this process hung (``transport/link/tx/lease``)."""
-    connect_timeout_ms: int = 15000
-    """How long a client waits for its router at start-up."""
+    connect_timeout_ms: int = bounded(15000, 0, 600_000, "ms")
+    """How long a client waits for its router at start-up (0: it tries once); then
+    :func:`open_session` fails with one line naming the endpoints."""
+    config_file: str | None = None
+    """A Zenoh JSON5 config file to start from (TLS, access control, ...); the settings above
+    are applied on top of it, so its mode, endpoints, scouting and lease are never used."""
 
     def validate(self, where: str) -> None:
         if self.mode not in ("client", "peer", "router"):
             raise ConfigError(f"{where}.mode: expected client, peer or router, got {self.mode!r}")
         for key in ("connect", "listen"):
             for i, endpoint in enumerate(getattr(self, key)):
-                if not _ENDPOINT.match(endpoint):
-                    raise ConfigError(
-                        f"{where}.{key}[{i}]: expected an explicit endpoint like "
-                        f"tcp/127.0.0.1:7447, got {endpoint!r}"
-                    )
+                self.check_endpoint(endpoint, f"{where}.{key}[{i}]")
         if self.mode == "client" and not self.connect:
             raise ConfigError(f"{where}.connect: a client needs at least one router endpoint")
         if self.mode == "router" and not self.listen:
             raise ConfigError(f"{where}.listen: a router needs at least one endpoint")
-        if self.lease_ms < 100 or self.connect_timeout_ms < 0:
-            raise ConfigError(f"{where}: lease_ms must be >= 100 and connect_timeout_ms >= 0")
+        check_bounds(self, where)
+        if self.config_file is not None:
+            self.check_config_file(self.config_file, f"{where}.config_file")
+
+    @staticmethod
+    def check_endpoint(endpoint: str, where: str) -> None:
+        """:class:`ConfigError` naming ``where`` unless ``endpoint`` is explicit
+        (``tcp/HOST:PORT``, or ``udp``, ``quic``, ``tls``)."""
+        if not _ENDPOINT.match(endpoint) or not 1 <= int(endpoint.rsplit(":", 1)[1]) <= 65535:
+            raise ConfigError(
+                f"{where}: expected an explicit endpoint like tcp/127.0.0.1:7447 (port 1 to"
+                f" 65535), got {endpoint!r}"
+            )
+
+    @staticmethod
+    def check_config_file(path: str, where: str) -> None:
+        """:class:`ConfigError` naming ``where`` unless ``path`` is a readable file."""
+        try:
+            with open(path, "rb"):
+                pass
+        except OSError as err:
+            raise ConfigError(f"{where}: {path}: cannot read ({err.strerror or err})") from None
 
 
 def zenoh_config(settings: ZenohSettings):
-    """The ``zenoh.Config`` for ``settings`` (multicast scouting always off)."""
+    """The ``zenoh.Config`` for ``settings`` (multicast scouting always off): its
+    ``config_file`` if any (``zenoh.ZError`` if that is not a valid Zenoh config), with the
+    project's keys set on top."""
     import zenoh
 
-    config = zenoh.Config()
+    if settings.config_file is not None:
+        config = zenoh.Config.from_file(settings.config_file)
+    else:
+        config = zenoh.Config()
     config.insert_json5("mode", json.dumps(settings.mode))
     config.insert_json5("scouting/multicast/enabled", "false")
     config.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
@@ -71,11 +99,51 @@ def zenoh_config(settings: ZenohSettings):
     return config
 
 
+class SessionError(ConfigError):
+    """Zenoh could not open the session: ``str()`` is one line naming the endpoint and why,
+    e.g. ``listen tcp/127.0.0.1:7447: address already in use`` or ``connect
+    tcp/127.0.0.1:7447: no answer within 15000 ms (connect_timeout_ms); is the router
+    running?``."""
+
+
 def open_session(settings: ZenohSettings):
-    """Open a Zenoh session; close it with ``session.close()`` (or use it in ``with``)."""
+    """Open a Zenoh session; close it with ``session.close()`` (or use it in ``with``).
+    :class:`SessionError` if Zenoh cannot (it raises ``zenoh.ZError``: a busy or unusable
+    port, no router within ``connect_timeout_ms``)."""
     import zenoh
 
-    return zenoh.open(zenoh_config(settings))
+    try:
+        return zenoh.open(zenoh_config(settings))
+    except zenoh.ZError as err:
+        raise SessionError(session_error(str(err), settings)) from None
+
+
+_LISTENER = re.compile(r"listener bound to (\w+/\S+?): \[.*?: (.+?) \(os error \d+\)", re.S)
+_UNREACHABLE = re.compile(r"Unable to connect to any of \[(.*?)\]\s*(\. Timeout!|!)", re.S)
+
+
+def session_error(message: str, settings: ZenohSettings) -> str:
+    """Zenoh's error on opening a session as one line naming the endpoint and the cause."""
+    listener = _LISTENER.search(message)
+    if listener:
+        endpoint, cause = listener.groups()
+        return f"listen {endpoint}: {cause[:1].lower()}{cause[1:]}"
+    unreachable = _UNREACHABLE.search(message)
+    if unreachable:
+        endpoints = re.findall(r"\w+/[^\s(),\]]+", unreachable[1]) or list(settings.connect)
+        timeout = settings.connect_timeout_ms
+        waited = f"within {timeout} ms (connect_timeout_ms)"
+        if not timeout:
+            waited = "to one try (connect_timeout_ms = 0)"
+        return f"connect {', '.join(endpoints)}: no answer {waited}; is the router running?"
+    where = ", ".join((*settings.listen, *settings.connect)) or "zenoh"
+    return f"{where}: {_one_line(message)}"
+
+
+def _one_line(message: str) -> str:
+    """Zenoh's error text without its source locations and nesting."""
+    message = re.sub(r"\s+at\s+\S+\.rs:\d+\.?", "", message)
+    return " ".join(message.replace("[", " ").replace("]", " ").split()).rstrip(".")
 
 
 def tick_publisher(session, key: str):
@@ -89,24 +157,14 @@ def tick_publisher(session, key: str):
     )
 
 
-class EventQueue:
-    """Where a process's Zenoh callbacks leave what they receive, for its main thread.
+def watch_liveliness(session, key: str, on_change: Callable[[str, bool], None]):
+    """Subscribe to the liveliness tokens matching ``key`` (those already there included):
+    ``on_change(token key, alive)`` when one appears or disappears (its process was killed or
+    hung past its lease). Returns the subscriber (``undeclare()`` it when done)."""
+    import zenoh
 
-    Callbacks run on Zenoh's threads and must stay tiny (a busy thread holding the GIL delays
-    them by milliseconds): they only :meth:`put`; the main thread :meth:`drain`\\ s.
-    """
-
-    def __init__(self) -> None:
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
-
-    def put(self, event) -> None:
-        self._queue.put(event)
-
-    def drain(self, handle, timeout: float | None) -> None:
-        """Wait up to ``timeout`` s for an event, then ``handle`` it and every other queued."""
-        try:
-            handle(self._queue.get(timeout=timeout))
-            while True:
-                handle(self._queue.get_nowait())
-        except queue.Empty:
-            pass
+    return session.liveliness().declare_subscriber(
+        key,
+        lambda s: on_change(str(s.key_expr), s.kind == zenoh.SampleKind.PUT),
+        history=True,
+    )

@@ -7,16 +7,13 @@ random places along the boundary (at least 0.2 m apart) and a random initial pos
 kind cycles with the seed (``seed % 4``) and so does convexity (``seed // 4 % 2``), so any
 eight consecutive seeds cover every combination.
 
-Command line: ``python -m simulator.generate SEED [-o FILE]`` writes the scenario as TOML.
+Command line: ``heft scenario generate SEED [-o FILE]`` writes the scenario as TOML.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
-import sys
-from collections.abc import Callable, Sequence
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -28,7 +25,6 @@ from simulator.scenario import (
     point_in_polygon,
     polygon_area_centroid_moment,
     polygon_diameter,
-    scenario_to_toml,
 )
 
 GRAPH_KINDS = ("line", "ring", "star", "random")
@@ -280,28 +276,3 @@ def ring_scenario(n: int, *, name: str | None = None) -> Scenario:
         "graph": {"edges": [[i, i % n + 1] for i in range(1, n + 1)]},
     }
     return parse_scenario(data, data["name"])
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m simulator.generate SEED [-o FILE]``: write a generated scenario as TOML."""
-    parser = argparse.ArgumentParser(
-        prog="python -m simulator.generate",
-        description="Write the random scenario of a seed as a scenario TOML file.",
-    )
-    parser.add_argument("seed", metavar="SEED", type=int, help="non-negative integer seed")
-    parser.add_argument(
-        "-o", "--output", metavar="FILE", help="write to FILE instead of standard output"
-    )
-    args = parser.parse_args(argv)
-    if args.seed < 0:
-        parser.error("SEED must be >= 0")
-    text = scenario_to_toml(generate_scenario(args.seed))
-    if args.output:
-        Path(args.output).write_text(text, encoding="utf-8")
-    else:
-        sys.stdout.write(text)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,9 +1,9 @@
-"""The plant as a process on Zenoh: ``heft sim SCENARIO``.
+"""The plant as a process: ``heft sim SCENARIO``.
 
-It stands where the real AGVs will: it publishes each robot's measurement on
-``heft/<team>/robot/<id>/velocity``, applies each robot's latest command from
-``heft/<team>/robot/<id>/force``, and publishes ground truth on ``heft/<team>/plant/truth`` for
-evaluation and display only (no agent subscribes to it).
+It stands where the real AGVs will, behind a robots' port (:mod:`agent.robot_io`): it sends
+each robot's measurement to its agent, applies each robot's latest command, and reports its
+clock, ground truth (for evaluation and display only: no agent subscribes to it) and
+counters.
 
 - ``lockstep``: tick ``k`` is published, and the plant steps only once every live agent's
   command for tick ``k`` has arrived: deterministic, as fast as the agents allow. A robot that
@@ -12,7 +12,7 @@ evaluation and display only (no agent subscribes to it).
   command each robot has sent; late and missing commands are held (the previous one stays)
   and counted, and the latency from publishing a tick to receiving each command is measured.
 
-Robots whose agent's liveliness token disappears get zero force from then on.
+Robots whose agent's liveliness ends get zero force from then on.
 """
 
 from __future__ import annotations
@@ -21,140 +21,105 @@ import logging
 import statistics
 import threading
 import time
-from dataclasses import fields
+from collections import deque
 
-from agent.protocol import Clock, Command, DecodeError, Keys, decode, encode, encode_json
-from agent.zenoh_session import EventQueue, ZenohSettings, open_session, tick_publisher
-from simulator.plant import Plant, Truth
+from agent.process import RejectLog
+from agent.protocol import Clock, Command, Control, Keys, Measurement, PlantStatus
+from agent.robot_io import AgentsPort, Liveliness
+from agent.zenoh_robot_io import ZenohAgentsPort
+from agent.zenoh_session import ZenohSettings, open_session
+from simulator.plant import Plant
 from simulator.scenario import Scenario
 
 log = logging.getLogger("heft.sim")
-TRUTH_FIELDS = tuple(f.name for f in fields(Truth))
+LATENCY_SAMPLES = 10_000
+"""Command latencies kept for the percentiles: the newest 25 s of four robots at 100 Hz
+(memory stays flat however long the plant runs)."""
 RESEND_AFTER_S = 0.2
 """Lockstep: a tick not answered within this time is sent again to the silent robots."""
 
 
-def truth_message(truth: Truth) -> bytes:
-    """Every tick, so no deep copy: the fields as they are (tuples become JSON arrays)."""
-    return encode_json("truth", {name: getattr(truth, name) for name in TRUTH_FIELDS})
-
-
 class PlantNode:
-    """The plant's loop (see the module docstring)."""
+    """The plant's loop (see the module docstring), on any robots' port."""
 
     def __init__(
         self,
         scenario: Scenario,
-        session,
-        team: str,
+        port: AgentsPort,
         clock: str = "lockstep",
         stop: threading.Event | None = None,
         start_timeout_s: float = 30.0,
     ):
         self.scenario = scenario
         self.plant = Plant(scenario)
-        self.keys = keys = Keys(team)
+        self.port = port
         self.clock = clock
         self.stop = stop or threading.Event()
         self.start_timeout_s = start_timeout_s
-        self.events = EventQueue()
         self.alive: set[int] = set()
         self.lost: set[int] = set()
         self.commands: dict[int, Command] = {}
-        self.decode_errors = 0
         self.late = 0
         self.missing = 0
         self.overruns = 0
         self.resent = 0
-        self._sent: list[bytes] = []
-        self.latencies: list[float] = []
+        self._sent: list[Measurement] = []
+        self.latencies: deque[float] = deque(maxlen=LATENCY_SAMPLES)
+        """The newest command latencies (s), for the percentiles of :meth:`status`."""
+        self.latency_count = 0
         self._published_at = 0.0
-        n = scenario.n
-        self._velocity = [
-            tick_publisher(session, keys.robot(i, "velocity")) for i in range(1, n + 1)
-        ]
-        self._clock = session.declare_publisher(keys.plant("clock"))
-        self._truth = session.declare_publisher(keys.plant("truth"))
-        self._status = session.declare_publisher(keys.plant("status"))
-        self._subscribers = [
-            session.declare_subscriber(
-                keys.robot(0, "force"),
-                lambda s: self.events.put(
-                    ("force", str(s.key_expr), s.payload.to_bytes(), time.perf_counter())
-                ),
-            ),
-            session.declare_subscriber(
-                keys.control, lambda s: self.events.put(("control", s.payload.to_bytes()))
-            ),
-            session.liveliness().declare_subscriber(
-                keys.robot(0, "alive"),
-                lambda s: self.events.put(("alive", str(s.key_expr), str(s.kind))),
-                history=True,
-            ),
-        ]
 
     # ------------------------------------------------------------------ events
-    def _handle(self, event) -> None:
-        kind = event[0]
-        if kind == "force":
-            _, key, payload, arrived = event
-            try:
-                command = decode(Command, payload)
-                if command.robot != Keys.robot_of(key) or not 1 <= command.robot <= self.scenario.n:
-                    raise DecodeError(f"command of robot {command.robot} on {key}")
-            except DecodeError as err:
-                self.decode_errors += 1
-                if self.decode_errors <= 10:
-                    log.warning("undecodable command #%d: %s", self.decode_errors, err)
+    def _handle(self, arrived: float, item) -> None:
+        if isinstance(item, Command):
+            if item.tick > self.plant.tick:
+                why = "tick from the future"
+                self.port.rejects("command", f"tick {item.tick} at tick {self.plant.tick}", why)
                 return
-            if command.robot in self.lost:
+            if item.robot in self.lost:
                 return
-            previous = self.commands.get(command.robot)
-            if previous is None or command.tick > previous.tick:
-                self.commands[command.robot] = command
-                if command.tick == self.plant.tick:
+            previous = self.commands.get(item.robot)
+            if previous is None or item.tick > previous.tick:
+                self.commands[item.robot] = item
+                if item.tick == self.plant.tick:
                     self.latencies.append(arrived - self._published_at)
-        elif kind == "control":
-            try:
-                if decode("control", event[1]).get("command") == "stop":
-                    self.stop.set()
-            except DecodeError as err:
-                log.warning("undecodable control message: %s", err)
-        elif kind == "alive":
-            try:
-                robot = Keys.robot_of(event[1])
-            except DecodeError:
-                return
-            if "DELETE" in event[2].upper():
-                if self.stop.is_set():
-                    log.info("robot %d: agent left (the run is over)", robot)
-                    self.alive.discard(robot)
-                    return
+                    self.latency_count += 1
+        elif isinstance(item, Control):
+            self.stop.set()
+        elif isinstance(item, Liveliness):
+            robot = item.robot
+            if item.alive:
                 if robot not in self.lost:
-                    log.warning(
-                        "robot %d: agent gone at t = %.2f s; it pushes no more",
-                        robot,
-                        self.plant.time_s,
-                    )
-                self.lost.add(robot)
+                    self.alive.add(robot)
+                return
+            if self.stop.is_set():
+                log.info("robot %d: agent left (the run is over)", robot)
                 self.alive.discard(robot)
-                self.commands.pop(robot, None)
-                self.plant.command(robot, (0.0, 0.0))
-                self.publish_status()
-            elif robot not in self.lost:
-                self.alive.add(robot)
+                return
+            if robot not in self.lost:
+                log.warning(
+                    "robot %d: agent gone at t = %.2f s; it pushes no more",
+                    robot,
+                    self.plant.time_s,
+                )
+            self.lost.add(robot)
+            self.alive.discard(robot)
+            self.commands.pop(robot, None)
+            self.plant.command(robot, (0.0, 0.0))
+            self.publish_status()
 
     def _drain(self, timeout: float | None) -> None:
-        self.events.drain(self._handle, timeout)
+        for arrived, item in self.port.poll(timeout):
+            self._handle(arrived, item)
 
     # ------------------------------------------------------------------ ticks
     def _publish(self) -> None:
         k = self.plant.tick
         self._published_at = time.perf_counter()
-        self._sent = [encode(m) for m in self.plant.measure()]
-        for publisher, payload in zip(self._velocity, self._sent):
-            publisher.put(payload)
-        self._clock.put(encode(Clock(k, self.plant.time_s)))
+        self._sent = self.plant.measure()
+        for measurement in self._sent:
+            self.port.send(measurement)
+        self.port.report(Clock(k, self.plant.time_s))
 
     def _republish_to_the_silent(self) -> None:
         """Lockstep: send tick ``k`` again to the robots that have not answered it."""
@@ -162,7 +127,7 @@ class PlantNode:
         for robot in range(1, self.scenario.n + 1):
             command = self.commands.get(robot)
             if robot not in self.lost and (command is None or command.tick < k):
-                self._velocity[robot - 1].put(self._sent[robot - 1])
+                self.port.send(self._sent[robot - 1])
                 self.resent += 1
 
     def _apply(self) -> None:
@@ -177,7 +142,7 @@ class PlantNode:
             if command.tick < k:
                 self.late += 1
             self.plant.command(robot, command.force)
-        self._truth.put(truth_message(self.plant.truth()))
+        self.port.report(self.plant.truth())
         self.plant.advance()
 
     def _everyone_answered(self) -> bool:
@@ -207,12 +172,10 @@ class PlantNode:
 
     def run(self) -> int:
         s = self.scenario
-        log.info(
-            "plant up: %r, %d robots, %s clock, team %s", s.name, s.n, self.clock, self.keys.team
-        )
+        log.info("plant up: %r, %d robots, %s clock", s.name, s.n, self.clock)
         if not self.wait_for_agents():
             self.publish_status()
-            return 2
+            return 0 if self.stop.is_set() else 1  # stopped before the start, or agents missing
         log.info("all %d agents are up; starting", s.n)
         max_ticks = round(s.run.max_time_s / s.period_s)
         period = s.period_s
@@ -241,34 +204,30 @@ class PlantNode:
         self.publish_status()
         return 0
 
-    def status(self) -> dict:
+    def status(self) -> PlantStatus:
         lat = sorted(self.latencies)
 
         def pct(p: float) -> float | None:
             return lat[min(len(lat) - 1, round(p * (len(lat) - 1)))] * 1e3 if lat else None
 
-        return {
-            "tick": self.plant.tick,
-            "time_s": self.plant.time_s,
-            "clock": self.clock,
-            "late_commands": self.late,
-            "missing_commands": self.missing,
-            "overruns": self.overruns,
-            "resent": self.resent,
-            "decode_errors": self.decode_errors,
-            "lost": sorted(self.lost),
-            "latency_ms_p50": pct(0.5),
-            "latency_ms_p99": pct(0.99),
-            "latency_ms_mean": statistics.fmean(lat) * 1e3 if lat else None,
-            "latency_samples": len(lat),
-        }
+        return PlantStatus(
+            tick=self.plant.tick,
+            time_s=self.plant.time_s,
+            clock=self.clock,
+            late_commands=self.late,
+            missing_commands=self.missing,
+            overruns=self.overruns,
+            resent=self.resent,
+            decode_errors=self.port.rejects.total,
+            lost=tuple(sorted(self.lost)),
+            latency_ms_p50=pct(0.5),
+            latency_ms_p99=pct(0.99),
+            latency_ms_mean=statistics.fmean(lat) * 1e3 if lat else None,
+            latency_samples=self.latency_count,
+        )
 
     def publish_status(self) -> None:
-        self._status.put(encode_json("plant_status", self.status()))
-
-    def close(self) -> None:
-        for sub in self._subscribers:
-            sub.undeclare()
+        self.port.report(self.status())
 
 
 def run_plant(
@@ -279,9 +238,11 @@ def run_plant(
     stop: threading.Event,
     start_timeout_s: float = 30.0,
 ) -> int:
+    """Run the plant of ``scenario`` on Zenoh for team ``team`` until it is done or stopped."""
+    rejects = RejectLog(log, "plant")
     with open_session(zenoh) as session:
-        node = PlantNode(scenario, session, team, clock, stop, start_timeout_s)
+        port = ZenohAgentsPort(session, Keys(team), range(1, scenario.n + 1), rejects)
         try:
-            return node.run()
+            return PlantNode(scenario, port, clock, stop, start_timeout_s).run()
         finally:
-            node.close()
+            port.close()

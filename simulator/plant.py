@@ -7,7 +7,7 @@ answer with :meth:`Plant.command` (the force to apply until the next tick).
 :meth:`Plant.advance` then integrates one sensor period. :meth:`Plant.truth` exposes the ground
 truth for evaluation only.
 
-Conventions (those of the paper, see ``/work/shared/notes/paper-notes.md``):
+Conventions (those of the paper, Sec. II):
 
 - Frames: the world frame ``W`` and the load frame, whose origin sits at
   ``scenario.body.position`` and whose angle in ``W`` is ``scenario.body.angle`` at ``t = 0``.
@@ -30,68 +30,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pymunk
 from pymunk import Vec2d
 
-from agent.protocol import Measurement
+from agent.estimation.geometry import Vec2
+from agent.protocol import Measurement, Truth
 
 if TYPE_CHECKING:
     from simulator.scenario import Scenario
 
-Vec2 = tuple[float, float]
-
 _ZERO: Vec2 = (0.0, 0.0)
-
-
-@dataclass(frozen=True, slots=True)
-class Truth:
-    """The load's ground truth at ``tick`` (vectors in ``W``). For evaluation only: never given
-    to agents."""
-
-    tick: int
-    time_s: float
-    com_position: Vec2
-    """``p_C``."""
-    angle: float
-    """Angle of the load frame in ``W`` (rad)."""
-    com_velocity: Vec2
-    """``ṗ_C``."""
-    omega: float
-    """``ω``."""
-    contacts: tuple[Vec2, ...]
-    """``p_Ci``, robot ``1..n`` order."""
-    contact_velocities: tuple[Vec2, ...]
-    """``ṗ_Ci``."""
-    contact_to_com: tuple[Vec2, ...]
-    """``p_C − p_Ci``."""
-    mass: float
-    moment: float
-    """Moment of inertia about the COM."""
-
-    @property
-    def centroid(self) -> Vec2:
-        """``p_G``, the centroid of the contact points."""
-        n = len(self.contacts)
-        return (
-            math.fsum(p[0] for p in self.contacts) / n,
-            math.fsum(p[1] for p in self.contacts) / n,
-        )
-
-    @property
-    def centroid_offsets(self) -> tuple[Vec2, ...]:
-        """``z_i = p_Ci − p_G``."""
-        gx, gy = self.centroid
-        return tuple((x - gx, y - gy) for x, y in self.contacts)
-
-    @property
-    def com_offset(self) -> Vec2:
-        """``z_C = p_G − p_C``."""
-        gx, gy = self.centroid
-        return (gx - self.com_position[0], gy - self.com_position[1])
 
 
 class Plant:

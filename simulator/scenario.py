@@ -19,7 +19,9 @@ A scenario is a TOML file (``simulator/scenarios/paper.toml`` is the paper's Sec
 
 :func:`load_scenario` reads a file and :func:`parse_scenario` a table already decoded; both
 return a validated, frozen :class:`Scenario` or raise :class:`ScenarioError`, whose one-line
-message names the offending key. :func:`scenario_to_toml` writes a scenario back.
+message names the offending key. Every value has a range, declared next to its field
+(:func:`agent.config.bounded`) or as a constant below, and listed in the README ("Limits").
+:func:`scenario_to_toml` writes a scenario back.
 Tables are turned into dataclasses by :func:`agent.config.from_table`.
 """
 
@@ -35,9 +37,41 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agent.config import AgentTuning, ConfigError, from_table, non_negative, positive
+from agent.config import (
+    MAX_ROBOTS,
+    MAX_SEED,
+    AgentTuning,
+    ConfigError,
+    bounded,
+    check_bounds,
+    from_table,
+    toml_fields,
+    toml_value,
+)
+from agent.estimation.geometry import Vec2
 
-Vec2 = tuple[float, float]
+MAX_PHYSICS_HZ = 100_000.0
+"""Physics steps per second, at most."""
+MAX_SUBSTEPS = 100
+"""Physics steps per sensor tick, at most."""
+MAX_TIME_S = 3600.0
+"""A run's simulated-time limit, at most."""
+MAX_VERTICES = 1000
+"""Vertices of the load's polygon, at most (checking that it is simple takes time quadratic in
+their number: 0.3 s for 1000)."""
+MAX_COORDINATE = 100.0
+"""m: every vertex and the COM lie within this of the load frame's origin, per axis."""
+MIN_DIAMETER = 0.1
+"""m: the polygon is at least this wide (its diameter: the largest distance between vertices)."""
+MAX_POSITION = 1000.0
+"""m: the load starts within this of the world frame's origin, per axis (the messages carry
+positions up to 10 km)."""
+MAX_ANGLE = 2 * math.pi
+"""rad: the load's initial angle is in [-2π, 2π]."""
+GYRATION_RANGE = (0.01, 1.0)
+"""The moment of inertia's radius of gyration ``sqrt(J/m)``, as fractions of the polygon's
+diameter: a load whose mass lies within its outline stays below its diameter, and one below
+1 % of it would be a point mass on a weightless plate."""
 
 MIN_CONTACT_SPACING = 0.05
 """m: two contacts must be at least this far apart."""
@@ -67,17 +101,21 @@ class Body:
     """The load: its shape, mass, moment of inertia, COM and initial pose."""
 
     polygon: tuple[Vec2, ...]
-    """Vertices in the load frame (m), counter-clockwise, simple, possibly concave."""
+    """Vertices in the load frame (m), counter-clockwise, simple, possibly concave: 3 to
+    :data:`MAX_VERTICES` (1000) of them, each coordinate in [-100, 100] m, at least
+    :data:`MIN_DIAMETER` (0.1 m) across."""
     mass: float
-    """kg."""
+    """kg, in [0.01, 10000]."""
     moment: float
-    """kg m², about the COM."""
+    """kg m², about the COM, in [0.0001, 1000000], with a radius of gyration ``sqrt(J/m)``
+    between 1 % and 100 % of the polygon's diameter (:data:`GYRATION_RANGE`)."""
     com: Vec2
-    """Centre of mass in the load frame (m)."""
+    """Centre of mass in the load frame (m), within the polygon's bounding box."""
     position: Vec2 = (0.0, 0.0)
-    """Initial position of the load frame's origin in the world frame ``W`` (m)."""
+    """Initial position of the load frame's origin in the world frame ``W`` (m), each
+    coordinate in [-1000, 1000]."""
     angle: float = 0.0
-    """Initial angle of the load frame in ``W`` (rad)."""
+    """Initial angle of the load frame in ``W`` (rad), in [-2π, 2π]."""
     moment_given: bool = True
     """False when the file omitted ``moment``: it is then the polygon's moment for uniform
     density about its area centroid (also when ``com`` is given elsewhere)."""
@@ -89,39 +127,36 @@ class Body:
 class Sensors:
     """What the robots sense: sample rate and white measurement noise."""
 
-    rate_hz: float = 100.0
-    """Sensor (and agent) tick rate."""
-    velocity_noise_std: float = 0.0
+    rate_hz: float = bounded(100.0, 10, 1000, "Hz")
+    """Sensor (and agent) tick rate: robots' odometry runs at 10 Hz to 1 kHz (the agents'
+    defaults, e.g. the 0.5 s kick of Step 1, assume at least 10 Hz)."""
+    velocity_noise_std: float = bounded(0.0, 0, 1, "m/s")
     """m/s per axis, white, on each contact-point velocity."""
-    force_noise_std: float = 0.0
+    force_noise_std: float = bounded(0.0, 0, 100, "N")
     """N per axis, white, on each measured force."""
 
     def validate(self, where: str) -> None:
-        """Raise :class:`ConfigError` unless the rate is positive and the noises are >= 0."""
-        positive(where, rate_hz=self.rate_hz)
-        non_negative(
-            where,
-            velocity_noise_std=self.velocity_noise_std,
-            force_noise_std=self.force_noise_std,
-        )
+        """Raise :class:`ConfigError` naming the key and its range unless every field is in
+        its range."""
+        check_bounds(self, where)
 
 
 @dataclass(frozen=True)
 class RunSettings:
     """How a run is simulated."""
 
-    seed: int = 1
+    seed: int = bounded(1, 0, MAX_SEED)
     """Seed of every random draw of the run (noise, the agents' kicks)."""
-    physics_hz: float = 1000.0
-    """Physics step rate; an integer multiple of ``sensors.rate_hz``."""
-    max_time_s: float = 60.0
+    physics_hz: float = bounded(1000.0, 10, MAX_PHYSICS_HZ, "Hz")
+    """Physics step rate: an integer multiple of ``sensors.rate_hz``, at most
+    :data:`MAX_SUBSTEPS` (100) times it."""
+    max_time_s: float = bounded(60.0, 0, MAX_TIME_S, "s", open_low=True)
     """Simulated-time limit of a run (s)."""
 
     def validate(self, where: str) -> None:
-        """Raise :class:`ConfigError` unless seed >= 0 and the rates and times are positive."""
-        if self.seed < 0:
-            raise ConfigError(f"{where}.seed: expected a non-negative integer, got {self.seed!r}")
-        positive(where, physics_hz=self.physics_hz, max_time_s=self.max_time_s)
+        """Raise :class:`ConfigError` naming the key and its range unless every field is in
+        its range (the ratio to ``sensors.rate_hz`` is checked with the scenario)."""
+        check_bounds(self, where)
 
 
 @dataclass(frozen=True)
@@ -301,11 +336,14 @@ class _BodyTable:
     here are placeholders, whether they were given is read from the table's keys."""
 
     polygon: tuple[Vec2, ...]
-    mass: float
-    moment: float = 1.0
+    mass: float = bounded(dataclasses.MISSING, 0.01, 10_000, "kg")
+    moment: float = bounded(1.0, 1e-4, 1e6, "kg m²")
     com: Vec2 = (0.0, 0.0)
     position: Vec2 = (0.0, 0.0)
-    angle: float = 0.0
+    angle: float = bounded(0.0, -MAX_ANGLE, MAX_ANGLE, "rad")
+
+    def validate(self, where: str) -> None:
+        check_bounds(self, where)
 
 
 @dataclass(frozen=True)
@@ -353,14 +391,20 @@ def _check_text(data: Mapping[str, Any], key: str, nonempty: bool) -> str:
 
 def _check_polygon(polygon: tuple[Vec2, ...], key: str) -> None:
     """Raise unless ``polygon`` is a simple, counter-clockwise polygon of nonzero area."""
-    if len(polygon) < 3:
-        raise ScenarioError(f"{key}: expected at least 3 vertices, got {len(polygon)}")
+    if not 3 <= len(polygon) <= MAX_VERTICES:
+        raise ScenarioError(f"{key}: expected 3 to {MAX_VERTICES} vertices, got {len(polygon)}")
+    _check_coordinates(polygon, key, MAX_COORDINATE)
     for j, q in enumerate(polygon):
         for i in range(j):
             if polygon[i] == q:
                 raise ScenarioError(f"{key}[{j}]: repeats vertex {key}[{i}] {list(q)}")
+    diameter = polygon_diameter(polygon)
+    if diameter < MIN_DIAMETER:
+        raise ScenarioError(
+            f"{key}: the polygon is {diameter:.3g} m across; expected at least {MIN_DIAMETER} m"
+        )
     area = polygon_signed_area(polygon)
-    if abs(area) <= 1e-12 * polygon_diameter(polygon) ** 2:
+    if abs(area) <= 1e-12 * diameter**2:
         raise ScenarioError(f"{key}: the polygon has zero area")
     crossing = _first_self_intersection(polygon)
     if crossing is not None:
@@ -374,13 +418,50 @@ def _check_polygon(polygon: tuple[Vec2, ...], key: str) -> None:
         raise ScenarioError(f"{key}: the vertices are clockwise; they must be counter-clockwise")
 
 
+def _check_point(point: Vec2, key: str, limit: float) -> None:
+    """Raise unless both coordinates of ``point`` are in ``[-limit, limit]``."""
+    if not all(-limit <= c <= limit for c in point):
+        raise ScenarioError(
+            f"{key}: expected coordinates in [-{limit:g}, {limit:g}] m, got {list(point)}"
+        )
+
+
+def _check_coordinates(points: Sequence[Vec2], key: str, limit: float) -> None:
+    """Raise unless every coordinate of ``points`` is in ``[-limit, limit]``."""
+    for i, point in enumerate(points):
+        _check_point(point, f"{key}[{i}]", limit)
+
+
+def _check_mass_distribution(body: Body) -> None:
+    """Raise unless the COM lies in the polygon's bounding box and the radius of gyration is
+    within :data:`GYRATION_RANGE` of the polygon's diameter."""
+    xs, ys = [p[0] for p in body.polygon], [p[1] for p in body.polygon]
+    (x, y) = body.com
+    if not (min(xs) <= x <= max(xs) and min(ys) <= y <= max(ys)):
+        raise ScenarioError(
+            f"body.com: expected a point within the polygon's bounding box"
+            f" [{min(xs):g}, {max(xs):g}] x [{min(ys):g}, {max(ys):g}] m, got {list(body.com)}"
+        )
+    diameter = polygon_diameter(body.polygon)
+    low, high = (body.mass * (f * diameter) ** 2 for f in GYRATION_RANGE)
+    if not low <= body.moment <= high:
+        source = "body.moment" if body.moment_given else "body.moment (implied by the polygon)"
+        raise ScenarioError(
+            f"{source}: expected a number in [{low:.4g}, {high:.4g}] kg m² for this mass and"
+            f" polygon (a radius of gyration of 1 % to 100 % of its {diameter:.3g} m diameter),"
+            f" got {body.moment!r}"
+        )
+
+
 def _parse_body(table: Any) -> Body:
     raw = from_table(_BodyTable, table, "body")
     moment_given, com_given = "moment" in table, "com" in table
     _check_polygon(raw.polygon, "body.polygon")
-    positive("body", mass=raw.mass, moment=raw.moment)
+    if com_given:
+        _check_point(raw.com, "body.com", MAX_COORDINATE)
+    _check_point(raw.position, "body.position", MAX_POSITION)
     _, centroid, uniform_moment = polygon_area_centroid_moment(raw.polygon, raw.mass)
-    return Body(
+    body = Body(
         polygon=raw.polygon,
         mass=raw.mass,
         moment=raw.moment if moment_given else uniform_moment,
@@ -390,12 +471,16 @@ def _parse_body(table: Any) -> Body:
         moment_given=moment_given,
         com_given=com_given,
     )
+    _check_mass_distribution(body)
+    return body
 
 
 def _parse_contacts(table: Any, polygon: tuple[Vec2, ...]) -> tuple[Vec2, ...]:
     points = from_table(_ContactsTable, table, "contacts").points
-    if len(points) < 2:
-        raise ScenarioError(f"contacts.points: expected at least 2 contacts, got {len(points)}")
+    if not 2 <= len(points) <= MAX_ROBOTS:
+        raise ScenarioError(
+            f"contacts.points: expected 2 to {MAX_ROBOTS} contacts (robots), got {len(points)}"
+        )
     tolerance = boundary_tolerance(polygon)
     for i, point in enumerate(points):
         distance = distance_to_boundary(point, polygon)
@@ -465,6 +550,12 @@ def _check_rates(sensors: Sensors, run: RunSettings) -> None:
             f"run.physics_hz: expected a positive integer multiple of sensors.rate_hz "
             f"({sensors.rate_hz!r}), got {run.physics_hz!r}"
         )
+    if round(ratio) > MAX_SUBSTEPS:
+        raise ScenarioError(
+            f"run.physics_hz: expected at most {MAX_SUBSTEPS} physics steps per sensor tick"
+            f" ({MAX_SUBSTEPS * sensors.rate_hz:g} Hz at {sensors.rate_hz:g} Hz),"
+            f" got {run.physics_hz!r}"
+        )
 
 
 def _parse(data: Any) -> Scenario:
@@ -478,6 +569,7 @@ def _parse(data: Any) -> Scenario:
     run = from_table(RunSettings, data.get("run", {}), "run")
     _check_rates(sensors, run)
     agent = from_table(AgentTuning, data.get("agent", {}), "agent")
+    agent.check_period("agent", 1.0 / sensors.rate_hz, f"sensors.rate_hz = {sensors.rate_hz:g}")
     return Scenario(name, body, contacts, edges, sensors, run, agent, description)
 
 
@@ -514,55 +606,9 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
 # Writing
 # --------------------------------------------------------------------------------------------
 
-_ESCAPES = {
-    '"': '\\"',
-    "\\": "\\\\",
-    "\b": "\\b",
-    "\t": "\\t",
-    "\n": "\\n",
-    "\f": "\\f",
-    "\r": "\\r",
-}
-
-
-def _toml_string(text: str) -> str:
-    out = []
-    for char in text:
-        if char in _ESCAPES:
-            out.append(_ESCAPES[char])
-        elif ord(char) < 0x20 or ord(char) == 0x7F:
-            out.append(f"\\u{ord(char):04x}")
-        else:
-            out.append(char)
-    return '"' + "".join(out) + '"'
-
-
-def _toml_value(value: Any) -> str:
-    """One TOML value: booleans, integers, floats (``repr``, exact), strings, arrays."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, str):
-        return _toml_string(value)
-    if isinstance(value, (tuple, list)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise TypeError(f"cannot write {value!r} as TOML")
-
 
 def _toml_points(key: str, points: Sequence[Vec2]) -> list[str]:
-    return [f"{key} = ["] + [f"    {_toml_value(p)}," for p in points] + ["]"]
-
-
-def _toml_fields(obj: Any, only_changed: bool = False) -> list[str]:
-    default = type(obj)()
-    return [
-        f"{f.name} = {_toml_value(getattr(obj, f.name))}"
-        for f in dataclasses.fields(obj)
-        if not only_changed or getattr(obj, f.name) != getattr(default, f.name)
-    ]
+    return [f"{key} = ["] + [f"    {toml_value(p)}," for p in points] + ["]"]
 
 
 def _toml_body(body: Body) -> list[str]:
@@ -572,10 +618,10 @@ def _toml_body(body: Body) -> list[str]:
     else:
         lines.append(f"# moment omitted: uniform density over the polygon gives {body.moment!r}")
     if body.com_given:
-        lines.append(f"com = {_toml_value(body.com)}")
+        lines.append(f"com = {toml_value(body.com)}")
     else:
-        lines.append(f"# com omitted: the polygon's area centroid {_toml_value(body.com)}")
-    lines += [f"position = {_toml_value(body.position)}", f"angle = {body.angle!r}"]
+        lines.append(f"# com omitted: the polygon's area centroid {toml_value(body.com)}")
+    lines += [f"position = {toml_value(body.position)}", f"angle = {body.angle!r}"]
     return lines
 
 
@@ -587,13 +633,13 @@ def scenario_to_toml(s: Scenario) -> str:
     them again, to the same values. ``[agent]`` lists only the values that differ from the
     defaults.
     """
-    lines = [f"name = {_toml_value(s.name)}"]
+    lines = [f"name = {toml_value(s.name)}"]
     if s.description:
-        lines.append(f"description = {_toml_value(s.description)}")
+        lines.append(f"description = {toml_value(s.description)}")
     lines += ["", *_toml_body(s.body), "", "[contacts]", *_toml_points("points", s.contacts)]
-    lines += ["", "[graph]", f"edges = {_toml_value(s.edges)}"]
-    lines += ["", "[sensors]", *_toml_fields(s.sensors), "", "[run]", *_toml_fields(s.run)]
-    agent = _toml_fields(s.agent, only_changed=True)
+    lines += ["", "[graph]", f"edges = {toml_value(s.edges)}"]
+    lines += ["", "[sensors]", *toml_fields(s.sensors), "", "[run]", *toml_fields(s.run)]
+    agent = toml_fields(s.agent, only_changed=True)
     if agent:
         lines += ["", "[agent]", *agent]
     return "\n".join(lines) + "\n"

@@ -1,21 +1,24 @@
 """The ``heft`` command line: ``heft run`` on the paper's scenario end to end (exit status,
-results JSON, plots), bad input, and every subcommand's ``--help``."""
+results JSON, plots), bad input, every subcommand's ``--help``, and the dispatcher
+(agent/dispatch.py) that gathers the packages' commands."""
 
 from __future__ import annotations
 
 import contextlib
 import io
 import json
+import subprocess
+import sys
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from heft.cli import main
+from agent.dispatch import GROUP, main
+from tests.conftest import PAPER, ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "simulator" / "scenarios" / "paper.toml"
 PLOTS = ("relative_positions.png", "inertia_mass.png", "com_observer.png")
 BOUNDS = {
     "mass_rel": 0.005,
@@ -124,7 +127,8 @@ def test_bad_scenario_exits_two_with_one_line(tmp_path: Path) -> None:
 
 
 def test_help_works_for_every_command(capsys: pytest.CaptureFixture[str]) -> None:
-    for argv in ([], ["run"], ["scenario"], ["scenario", "generate"], ["bench"]):
+    commands = (["run"], ["scenario"], ["scenario", "generate"], ["bench"], ["demo"], ["sim"])
+    for argv in ([], *commands, ["agent"], ["router"]):
         with pytest.raises(SystemExit) as exit_info:
             main([*argv, "--help"])
         assert exit_info.value.code == 0, argv
@@ -138,3 +142,44 @@ def test_scenario_generate_writes_a_loadable_scenario(tmp_path: Path) -> None:
     ran = invoke("scenario", "generate", "7", "-o", str(path))
     assert ran.code == 0, ran.stderr
     assert load_scenario(path).name == "generated-7"
+
+
+def test_bench_help_shows_the_benchmark_default(capsys: pytest.CaptureFixture[str]) -> None:
+    from simulator.benchmark import DEFAULT_REPEAT
+
+    with pytest.raises(SystemExit):
+        main(["bench", "--help"])
+    assert f"number of runs (default: {DEFAULT_REPEAT})" in capsys.readouterr().out
+
+
+def test_no_command_prints_the_help_and_exits_two(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("usage: heft") and "commands:" in err
+
+
+def test_python_dash_m_agent_is_heft() -> None:
+    ran = subprocess.run(
+        [sys.executable, "-m", "agent", "--version"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert ran.returncode == 0, ran.stderr
+    assert ran.stdout.strip() == f"heft {metadata.version('heft-hil')}"
+
+
+def test_a_package_whose_commands_cannot_be_imported_is_left_out(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    broken = metadata.EntryPoint(name="broken", value="no_such_package.cli:register", group=GROUP)
+    installed = list(metadata.entry_points(group=GROUP))
+    monkeypatch.setattr(metadata, "entry_points", lambda group: [*installed, broken])
+    with pytest.raises(SystemExit) as exited:
+        main(["--help"])
+    assert exited.value.code == 0
+    out, err = capsys.readouterr()
+    assert "heft: warning: the broken commands are unavailable" in err
+    assert "no_such_package" in err and err.count("\n") == 1
+    assert "    run " in out and "    agent " in out

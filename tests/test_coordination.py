@@ -13,7 +13,7 @@ from collections.abc import Callable
 import pytest
 
 from agent.coordination import PhaseBarrier
-from agent.protocol import Share
+from agent.protocol import Phase, Share
 from agent.transport import InMemoryTransport, neighbour_map
 
 MARGIN = 3
@@ -219,21 +219,47 @@ def test_barrier_step_by_hand():
     assert b.ready == 0b11 and b.switch_at == 1 + 2
     assert b.step(2, False, []) is False
     assert b.step(3, False, []) is True
-    assert b.phase == 1 and b.ready == 0 and b.switch_at == -1
+    assert b.phase is Phase.INERTIA and b.ready == 0 and b.switch_at == -1
     # A neighbour already two phases on: catch up at once, own readiness not counted.
-    ahead = Share(sender=2, tick=3, velocity=(0.0, 0.0), degree=1, phase=3, ready=0b10)
+    ahead = Share(sender=2, tick=3, velocity=(0.0, 0.0), degree=1, phase=Phase.DONE, ready=0b10)
     assert b.step(4, True, [ahead]) is True
-    assert b.phase == 3 and b.ready == 0b10
+    assert b.phase is Phase.DONE and b.ready == 0b10
     # Shares of an earlier phase are ignored.
-    stale = Share(sender=2, tick=4, velocity=(0.0, 0.0), degree=1, phase=1, ready=0b11)
+    stale = Share(sender=2, tick=4, velocity=(0.0, 0.0), degree=1, phase=Phase.INERTIA, ready=0b11)
     assert b.step(5, False, [stale]) is False
-    assert b.phase == 3 and b.ready == 0b10
+    assert b.phase is Phase.DONE and b.ready == 0b10
     # The earlier of two proposals wins.
     c = PhaseBarrier(1, 2, 0)
     late = Share(sender=2, tick=0, velocity=(0.0, 0.0), degree=1, ready=0b11, switch_at=9)
     early = Share(sender=2, tick=0, velocity=(0.0, 0.0), degree=1, ready=0b11, switch_at=6)
-    c.step(1, False, [late, early])
+    c.step(5, False, [late, early])
     assert c.switch_at == 6
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_halt_reaches_every_robot_one_hop_per_tick(kind):
+    """``halted`` is the highest phase: it spreads by catch-up, ready or not, and nothing
+    leads out of it."""
+    n, first = 6, 4
+    team = Team(n, graph(kind, n), {0: dict.fromkeys(range(1, n + 1), 0)})
+    team.run(3)
+    team.barriers[first].halt()
+    assert team.barriers[first].phase is Phase.HALTED
+    hops = {first: 0}
+    frontier = [first]
+    while frontier:  # breadth-first distances from the halted robot
+        nxt = []
+        for i in frontier:
+            for j in team.transport.neighbours[i]:
+                if j not in hops:
+                    hops[j] = hops[i] + 1
+                    nxt.append(j)
+        frontier = nxt
+    team.run(n + 2 * MARGIN + n)
+    for i, b in team.barriers.items():
+        assert b.phase is Phase.HALTED
+        if i != first:
+            assert team.entered[i][Phase.HALTED] == 3 + hops[i]
 
 
 # --------------------------------------------------------------------------------------------

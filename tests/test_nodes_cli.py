@@ -7,11 +7,15 @@ process subcommands' bad input and help: all without a Zenoh network.
   and the key;
 - deploy/zenoh/router.json5 is the router ``heft router`` runs: loopback only, no multicast;
 - ``heft agent|sim|router|run`` exit 2 with one ``heft: error:`` line on bad input, and
-  ``--help`` describes each command.
+  ``--help`` describes each command;
+- the Zenoh options every process command shares (``--connect``, ``--listen``,
+  ``--zenoh-config``) replace what they name and nothing else, and a Zenoh config file is the
+  base the project's settings are applied on.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import re
@@ -20,17 +24,18 @@ from pathlib import Path
 
 import pytest
 
+from agent.command_line import UsageError, add_zenoh_options, zenoh_settings
 from agent.config import AgentTuning, ConfigError, from_table
+from agent.dispatch import main
 from agent.faults import FaultSettings
-from agent.node import CLOCKS, AgentNodeConfig, load_agent_config
+from agent.node import AgentNodeConfig, load_agent_config
+from agent.protocol import CLOCKS
 from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings, zenoh_config
-from heft.cli import main
-from heft.launcher import robot_toml
+from simulator.launcher import robot_toml
 from simulator.scenario import load_scenario
+from tests.conftest import PAPER, ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 DEPLOY = ROOT / "deploy"
-PAPER = ROOT / "simulator" / "scenarios" / "paper.toml"
 ROBOT_FILES = {i: DEPLOY / "paper" / f"robot-{i}.toml" for i in range(1, 5)}
 ROUTER_JSON5 = DEPLOY / "zenoh" / "router.json5"
 LOOPBACK = re.compile(r"^tcp/127\.0\.0\.1:\d{1,5}$")
@@ -218,6 +223,10 @@ CASES = {
     ),
     "zenoh-mode-unknown": (toml_text(BASE, zenoh={"mode": "broker"}), "agent.zenoh.mode"),
     "lease-too-short": (toml_text(BASE, zenoh={"lease_ms": 10}), "lease_ms"),
+    "zenoh-config-file-missing": (
+        toml_text(BASE, zenoh={"config_file": "/nonexistent/zenoh.json5"}),
+        "agent.zenoh.config_file",
+    ),
     "faults-drop-1.5": (toml_text(BASE, faults={"drop": 1.5}), "agent.faults.drop"),
     "faults-drop-1": (toml_text(BASE, faults={"drop": 1.0}), "agent.faults.drop"),
     "faults-drop-negative": (toml_text(BASE, faults={"drop": -0.1}), "agent.faults.drop"),
@@ -462,6 +471,7 @@ HELP = {
     "router": ("--listen", "Run a Zenoh router"),
     "demo": ("--out", "Run the paper's Sec. VI scenario"),
 }
+ZENOH_COMMANDS = ("agent", "sim", "router")
 
 
 @pytest.mark.parametrize("command", HELP)
@@ -482,3 +492,119 @@ def test_top_level_help_lists_the_process_commands(capsys) -> None:
     out, _ = capsys.readouterr()
     for command in HELP:
         assert re.search(rf"^\s+{command}\s+\S", out, re.M), command
+
+
+@pytest.mark.parametrize("command", ZENOH_COMMANDS)
+def test_every_process_command_documents_the_zenoh_options(command: str, capsys) -> None:
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    out, _ = capsys.readouterr()
+    for option in ("--connect ENDPOINT", "--listen ENDPOINT", "--zenoh-config FILE"):
+        assert option in out, option
+    assert "Multicast scouting is always off" in out
+
+
+# ----------------------------------------------------------------------------- Zenoh options
+ROBOT_1 = str(ROBOT_FILES[1])
+ZENOH_ARGS = {
+    "agent": ["agent", "--config", ROBOT_1],
+    "sim": ["sim", str(PAPER)],
+    "router": ["router"],
+}
+JSON5 = '{\n  // a comment\n  mode: "peer",\n  scouting: { multicast: { enabled: true } },\n}\n'
+
+
+def parse_zenoh_options(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_zenoh_options(parser, connect="c", listen="l")
+    return parser.parse_args(argv)
+
+
+@pytest.mark.parametrize("command", ZENOH_COMMANDS)
+@pytest.mark.parametrize("option", ["--connect", "--listen"])
+@pytest.mark.parametrize("endpoint", ["bad", "127.0.0.1:7447", "tcp/127.0.0.1"])
+def test_a_bad_endpoint_names_the_option(command, option, endpoint, capsys) -> None:
+    code = main([*ZENOH_ARGS[command], option, DEFAULT_ROUTER, option, endpoint])
+    out, err = capsys.readouterr()
+    line = assert_usage_error(code, err, option, repr(endpoint))
+    assert line.startswith(f"heft: error: {option}: expected an explicit endpoint")
+    assert len(err.strip().splitlines()) == 1 and out == ""
+
+
+@pytest.mark.parametrize("command", ZENOH_COMMANDS)
+def test_a_missing_zenoh_config_file_names_the_option(command, tmp_path: Path, capsys) -> None:
+    missing = tmp_path / "missing.json5"
+    code = main([*ZENOH_ARGS[command], "--zenoh-config", str(missing)])
+    out, err = capsys.readouterr()
+    line = assert_usage_error(code, err, "--zenoh-config", str(missing), "cannot read")
+    assert line.startswith("heft: error: --zenoh-config: ")
+    assert len(err.strip().splitlines()) == 1 and out == ""
+
+
+@pytest.mark.parametrize("command", ZENOH_COMMANDS)
+@pytest.mark.parametrize(
+    "text, words",
+    [("{ mode: ", ("1:9", "expected")), ("{\n  colour: 3 }", ("2:3", "unknown field", "colour"))],
+    ids=["unfinished", "unknown-key"],
+)
+def test_an_invalid_zenoh_config_file_is_one_line(command, text, words, tmp_path, capsys) -> None:
+    bad = tmp_path / "bad.json5"
+    bad.write_text(text, encoding="utf-8")
+    code = main([*ZENOH_ARGS[command], "--zenoh-config", str(bad)])
+    _, err = capsys.readouterr()
+    assert_usage_error(code, err, "--zenoh-config", str(bad), "not a valid Zenoh config", *words)
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_a_directory_is_not_a_zenoh_config_file(tmp_path: Path) -> None:
+    with pytest.raises(UsageError, match=r"^--zenoh-config: .*: cannot read"):
+        zenoh_settings(parse_zenoh_options("--zenoh-config", str(tmp_path)), ZenohSettings())
+
+
+def test_without_zenoh_options_the_base_settings_stay(deployed) -> None:
+    base = deployed[1].zenoh
+    assert zenoh_settings(parse_zenoh_options(), base) == base
+
+
+def test_zenoh_options_replace_what_they_name_and_nothing_else(deployed, tmp_path) -> None:
+    """``heft agent --connect ...`` overrides robot.toml's ``[zenoh] connect`` only."""
+    path = tmp_path / "zenoh.json5"
+    path.write_text(JSON5, encoding="utf-8")
+    base = dataclasses.replace(deployed[1].zenoh, lease_ms=3000)
+    args = parse_zenoh_options(
+        "--connect",
+        "tcp/10.0.0.1:7447",
+        "--connect",
+        "tcp/10.0.0.2:7447",
+        "--listen",
+        "tcp/0.0.0.0:7448",
+        "--zenoh-config",
+        str(path),
+    )
+    assert zenoh_settings(args, base) == dataclasses.replace(
+        base,
+        connect=("tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447"),
+        listen=("tcp/0.0.0.0:7448",),
+        config_file=str(path),
+    )
+    connect_only = zenoh_settings(parse_zenoh_options("--connect", "tcp/10.0.0.1:7447"), base)
+    assert connect_only == dataclasses.replace(base, connect=("tcp/10.0.0.1:7447",))
+
+
+def test_a_zenoh_config_file_is_the_base_of_the_projects_settings(tmp_path: Path) -> None:
+    pytest.importorskip("zenoh")
+    path = tmp_path / "zenoh.json5"
+    path.write_text(JSON5.replace("mode", "queries_default_timeout: 1234,\n  mode"), "utf-8")
+    settings = ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,), config_file=str(path))
+    config = zenoh_config(settings)
+    assert json.loads(config.get_json("queries_default_timeout")) == 1234  # the file's own
+    assert json.loads(config.get_json("mode")) == "client"  # the project's, on top
+    assert json.loads(config.get_json("scouting/multicast/enabled")) is False
+    assert json.loads(config.get_json("connect/endpoints")) == [DEFAULT_ROUTER]
+
+
+def test_a_robot_toml_can_name_a_zenoh_config_file(tmp_path: Path) -> None:
+    path = tmp_path / "zenoh.json5"
+    path.write_text(JSON5, encoding="utf-8")
+    config = load_config_text(toml_text(BASE, zenoh={"config_file": str(path)}))
+    assert config.zenoh.config_file == str(path)

@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simulator.plant import Plant, Truth
+from agent.estimation.geometry import Vec2
+from agent.protocol import Truth
+from simulator.plant import Plant
 from simulator.scenario import Scenario, Sensors, load_scenario
 
 PAPER = Path(__file__).resolve().parents[1] / "simulator" / "scenarios" / "paper.toml"
-
-Vec2 = tuple[float, float]
 
 
 def perp(v: Vec2) -> Vec2:

@@ -10,50 +10,17 @@ from __future__ import annotations
 import ast
 import math
 import random
-from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent.protocol import Share
+from agent.protocol import Phase, Share
 from agent.transport import InMemoryTransport
-from heft.inprocess import RunOutcome, run_inprocess
 from simulator.generate import generate_scenario
+from simulator.inprocess import RunOutcome, run_inprocess
 from simulator.scenario import load_scenario
-
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "simulator" / "scenarios" / "paper.toml"
-
-
-def worst_errors(outcome: RunOutcome) -> dict[str, float]:
-    """The largest error over robots of each estimate, against truth at the same instant."""
-    truth = outcome.final.truth
-    worst = {"mass": 0.0, "moment": 0.0, "contact_to_com": 0.0, "relative": 0.0}
-    for i, est in outcome.final.estimates.items():
-        assert est.mass is not None and est.moment is not None, f"robot {i} has no m or J"
-        assert est.contact_to_com is not None, f"robot {i} has no contact_to_com"
-        worst["mass"] = max(worst["mass"], abs(est.mass - truth.mass) / truth.mass)
-        worst["moment"] = max(worst["moment"], abs(est.moment - truth.moment) / truth.moment)
-        err = math.dist(est.contact_to_com, truth.contact_to_com[i - 1])
-        worst["contact_to_com"] = max(worst["contact_to_com"], err)
-        pi = truth.contacts[i - 1]
-        for j, z in est.relative_positions.items():
-            pj = truth.contacts[j - 1]
-            err = math.dist(z, (pi[0] - pj[0], pi[1] - pj[1]))
-            worst["relative"] = max(worst["relative"], err)
-    return worst
-
-
-def assert_within(outcome: RunOutcome, rel: float, metres: float) -> None:
-    assert outcome.converged, f"not converged in {outcome.sim_time_s:.1f} s"
-    assert outcome.sim_time_s < 60.0
-    worst = worst_errors(outcome)
-    assert worst["mass"] <= rel, worst
-    assert worst["moment"] <= rel, worst
-    assert worst["contact_to_com"] <= metres, worst
-    assert worst["relative"] <= metres, worst
-    assert len(outcome.final.estimates[1].relative_positions) > 0
+from tests.conftest import PAPER, ROOT, assert_within
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +37,7 @@ def test_paper_scenario_passes_every_step_in_order(paper_run: RunOutcome) -> Non
     assert ticks["excite"] == 0 < ticks["inertia"] < ticks["push"] < ticks["done"]
     for est in paper_run.final.estimates.values():
         assert sorted(est.settled) == [1, 2, 3, 4, 5, 6, 7]
-        assert est.phase == "done"
+        assert est.phase == Phase.DONE
 
 
 def test_the_load_keeps_turning_one_way_during_step_one(paper_run: RunOutcome) -> None:
@@ -149,7 +116,7 @@ class LeakyTransport(InMemoryTransport):
 
 
 def test_agents_ignore_robots_that_are_not_their_neighbours(paper_run: RunOutcome) -> None:
-    from heft import inprocess
+    from simulator import inprocess
 
     scenario = paper_run.scenario
     transport = LeakyTransport(scenario.n, scenario.edges)

@@ -15,7 +15,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from agent.config import AgentTuning, ConfigError
-from simulator.generate import GRAPH_KINDS, generate_scenario, main
+from agent.dispatch import main
+from simulator.generate import GRAPH_KINDS, generate_scenario
 from simulator.scenario import (
     Scenario,
     ScenarioError,
@@ -195,7 +196,7 @@ INVALID = [
     ("missing mass", drop("body.mass"), "body.mass", "missing"),
     ("missing contacts", drop("contacts.points"), "contacts.points", "missing"),
     ("missing edges", drop("graph.edges"), "graph.edges", "missing"),
-    ("two vertices", put("body.polygon", [[0, 0], [1, 0]]), "body.polygon", "at least 3"),
+    ("two vertices", put("body.polygon", [[0, 0], [1, 0]]), "body.polygon", "3 to 1000 vertices"),
     (
         "infinite vertex",
         put("body.polygon", [[-1, -1], [math.inf, -1], [1, 1], [-1, 1]]),
@@ -239,15 +240,15 @@ INVALID = [
         "body.polygon",
         "counter-clockwise",
     ),
-    ("negative mass", put("body.mass", -1), "body.mass", "expected a positive number, got -1"),
-    ("zero mass", put("body.mass", 0.0), "body.mass", "positive"),
+    ("negative mass", put("body.mass", -1), "body.mass", "in [0.01, 10000] kg, got -1"),
+    ("zero mass", put("body.mass", 0.0), "body.mass", "[0.01, 10000]"),
     ("mass not a number", put("body.mass", "heavy"), "body.mass", "number"),
-    ("negative moment", put("body.moment", -2.0), "body.moment", "positive"),
-    ("zero moment", put("body.moment", 0), "body.moment", "positive"),
+    ("negative moment", put("body.moment", -2.0), "body.moment", "[0.0001, 1000000]"),
+    ("zero moment", put("body.moment", 0), "body.moment", "[0.0001, 1000000]"),
     ("com of 3 values", put("body.com", [0, 0, 0]), "body.com", "2 values"),
     ("position not a pair", put("body.position", 1.0), "body.position", "list"),
     ("angle not a number", put("body.angle", "up"), "body.angle", "number"),
-    ("one contact", put("contacts.points", [[-1, 0]]), "contacts.points", "at least 2"),
+    ("one contact", put("contacts.points", [[-1, 0]]), "contacts.points", "2 to 32"),
     (
         "contacts too close",
         put("contacts.points", [[-1, -0.5], [0.5, -1], [-1, -0.47]]),
@@ -295,23 +296,23 @@ INVALID = [
     ("no edges", put("graph.edges", []), "graph.edges", "no edge"),
     ("edge not a pair", put("graph.edges", [[1, 2, 3]]), "graph.edges[0]", "2 values"),
     ("edge of floats", put("graph.edges", [[1.0, 2.0]]), "graph.edges[0][0]", "integer"),
-    ("zero rate", put("sensors.rate_hz", 0), "sensors.rate_hz", "positive"),
-    ("negative rate", put("sensors.rate_hz", -100.0), "sensors.rate_hz", "positive"),
+    ("zero rate", put("sensors.rate_hz", 0), "sensors.rate_hz", "[10, 1000]"),
+    ("negative rate", put("sensors.rate_hz", -100.0), "sensors.rate_hz", "[10, 1000]"),
     (
         "negative velocity noise",
         put("sensors.velocity_noise_std", -0.1),
         "sensors.velocity_noise_std",
-        "non-negative",
+        "[0, 1] m/s",
     ),
     (
         "negative force noise",
         put("sensors.force_noise_std", -1),
         "sensors.force_noise_std",
-        "non-negative",
+        "[0, 100] N",
     ),
     ("physics not a multiple", put("run.physics_hz", 250.0), "run.physics_hz", "multiple"),
     ("physics slower than sensors", put("run.physics_hz", 50.0), "run.physics_hz", "multiple"),
-    ("zero physics rate", put("run.physics_hz", 0.0), "run.physics_hz", "positive"),
+    ("zero physics rate", put("run.physics_hz", 0.0), "run.physics_hz", "[10, 100000]"),
     ("zero max time", put("run.max_time_s", 0.0), "run.max_time_s", "positive"),
     ("negative max time", put("run.max_time_s", -5), "run.max_time_s", "positive"),
     ("negative seed", put("run.seed", -1), "run.seed", "non-negative"),
@@ -495,7 +496,7 @@ def test_generation_is_deterministic() -> None:
 
 def test_generate_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "g.toml"
-    assert main(["7", "-o", str(path)]) == 0
+    assert main(["scenario", "generate", "7", "-o", str(path)]) == 0
     assert load_scenario(path) == GENERATED[7]
-    assert main(["7"]) == 0
+    assert main(["scenario", "generate", "7"]) == 0
     assert parse_scenario(tomllib.loads(capsys.readouterr().out)) == GENERATED[7]

@@ -30,16 +30,23 @@ from agent.estimation.geometry import Vec2
 
 
 class ComObserver:
-    """Observer (24) of ``z_C`` in ``W``, for a common force along ``force_direction``."""
+    """Observer (24) of ``z_C`` in ``W``, while the team pushes with a common force ``force``
+    (eq. 17); started at ``ẑ_C = 0``, ``x̂_3 = ω``."""
 
     def __init__(self, n: int, moment: float, force: Vec2, gain: float, omega: float):
         magnitude = math.hypot(force[0], force[1])
         self.axis_y = (force[0] / magnitude, force[1] / magnitude)
+        """The unit vector along ``f``: the y axis of system (21)'s coordinates, in ``W``."""
         self.axis_x = (self.axis_y[1], -self.axis_y[0])  # right-handed: x⊥ = y
+        """Their x axis (``x⊥ = y``), in ``W``."""
         self.fbar = n * magnitude / moment
+        """``f̄_y = (n/J) ‖f‖`` (eq. 19)."""
         self.gain = gain
+        """``k_e``."""
         self.state = [0.0, 0.0, omega]
+        """``(x̂_1, x̂_2, x̂_3)``: ``ẑ_C`` in those coordinates, and ``ω̂``."""
         self.omega = omega
+        """``ω`` measured at the end of the last interval."""
 
     def _rhs(self, h: list[float], x3: float) -> tuple[float, float, float]:
         e3 = x3 - h[2]
@@ -61,8 +68,13 @@ class ComObserver:
         self.omega = omega
 
     @property
-    def com_offset(self) -> Vec2:
-        """``ẑ_C`` in ``W``."""
+    def estimate(self) -> Vec2:
+        """``ẑ_C`` in ``W`` now."""
         x1, x2 = self.state[0], self.state[1]
         ax, ay = self.axis_x, self.axis_y
         return (x1 * ax[0] + x2 * ay[0], x1 * ax[1] + x2 * ay[1])
+
+    @property
+    def covariance(self) -> None:
+        """Not estimated yet."""
+        return None

@@ -51,12 +51,17 @@ class ComRegression:
         self._alpha = alpha
 
     @property
-    def reference_offset(self) -> Vec2 | None:
+    def estimate(self) -> Vec2 | None:
         """``c``: ``z_C`` at the reference instant, in ``W`` then."""
         est = self.regression.estimate
         return None if est is None else (est[0], est[1])
 
+    @property
+    def covariance(self) -> None:
+        """Not estimated yet."""
+        return None
+
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C = R(α) c`` after a rotation ``α`` (eq. 6 with the rotation written out)."""
-        c = self.reference_offset
+        c = self.estimate
         return None if c is None else rotate(c, alpha)

@@ -9,13 +9,11 @@ where ``r_i`` is the robot's own input (``‖z_i‖²`` for Step 4's ``w = Σ‖
 ``Σ_j a_ij < 1``, so the iteration converges on any connected graph using only the
 neighbours' degrees. The last term lets the input change while consensus runs: ``Σ ξ_i = Σ r_i``
 at every step, so once the inputs settle every ``ξ_i`` converges to their average ``w / n``.
-The agent runs it in flow form (:mod:`agent.estimation.flows`), which keeps that sum when
-messages are lost.
+:class:`~agent.estimation.centroid.CentroidConsensus` runs it beside Step 2, in flow form
+(:mod:`agent.estimation.flows`), which keeps that sum when messages are lost.
 """
 
 from __future__ import annotations
-
-from collections.abc import Iterable
 
 
 def metropolis_weight(degree_i: int, degree_j: int) -> float:
@@ -26,10 +24,3 @@ def metropolis_weight(degree_i: int, degree_j: int) -> float:
 def consensus_term(a: float, state: float, neighbour_state: float) -> float:
     """Edge ``ij``'s term of the update, ``a_ij (ξ_j − ξ_i)``."""
     return a * (neighbour_state - state)
-
-
-def average_consensus_step(
-    state: float, neighbours: Iterable[tuple[float, float]], input_change: float = 0.0
-) -> float:
-    """One update of ``ξ_i`` from ``(a_ij, ξ_j)`` pairs and the change of the own input."""
-    return state + sum(consensus_term(a, state, xj) for a, xj in neighbours) + input_change

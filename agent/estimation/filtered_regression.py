@@ -44,7 +44,6 @@ class FilteredRegression:
         self.params = params
         self.forgetting = forgetting
         self.started = False
-        self.samples = 0
         self._y: list[float] = [0.0] * outputs
         self._yf: list[float] = [0.0] * outputs
         self._s: list[list[float]] = [[0.0] * params for _ in range(outputs)]
@@ -58,7 +57,6 @@ class FilteredRegression:
         self._s = [[0.0] * self.params for _ in range(self.outputs)]
         self._a = [[0.0] * self.params for _ in range(self.params)]
         self._b = [0.0] * self.params
-        self.samples = 0
         self.started = True
 
     def update(
@@ -88,17 +86,6 @@ class FilteredRegression:
                 for m in range(p):
                     a[j][m] += row[j] * row[m]
             self._y[i] = float(y[i])
-        self.samples += 1
-
-    @property
-    def information(self) -> float:
-        """Smallest eigenvalue of ``Σ SᵀS``: how well the data so far determine ``θ``."""
-        a = self._a
-        if self.params == 1:
-            return a[0][0]
-        tr = a[0][0] + a[1][1]
-        det = a[0][0] * a[1][1] - a[0][1] * a[1][0]
-        return 0.5 * tr - math.sqrt(max(0.25 * tr * tr - det, 0.0))
 
     @property
     def estimate(self) -> tuple[float, ...] | None:

@@ -31,7 +31,7 @@ class InertiaEstimator:
             filter_gain, outputs=1, params=1, forgetting=forgetting
         )
 
-    def update(self, omega: float, dt: float, torque: float) -> None:
+    def update(self, omega: float, torque: float, dt: float) -> None:
         """Feed ``ω`` at the end of an interval ``dt`` during which the team's torque was
         ``torque`` (``±k w``); the first call only starts the filters."""
         if not self.regression.started:
@@ -40,6 +40,12 @@ class InertiaEstimator:
             self.regression.update((omega,), ((torque * dt,),), dt)
 
     @property
-    def moment(self) -> float | None:
+    def estimate(self) -> float | None:
+        """``Ĵ = 1/θ̂`` (``None`` until ``θ̂ > 0``)."""
         est = self.regression.estimate
         return None if est is None or est[0] <= 0.0 else 1.0 / est[0]
+
+    @property
+    def covariance(self) -> None:
+        """Not estimated yet."""
+        return None

@@ -32,6 +32,12 @@ class MassEstimator:
             self.regression.update(com_velocity, ((fx * dt,), (fy * dt,)), dt)
 
     @property
-    def mass(self) -> float | None:
+    def estimate(self) -> float | None:
+        """``m̂ = 1/θ̂`` (``None`` until ``θ̂ > 0``)."""
         est = self.regression.estimate
         return None if est is None or est[0] <= 0.0 else 1.0 / est[0]
+
+    @property
+    def covariance(self) -> None:
+        """Not estimated yet."""
+        return None

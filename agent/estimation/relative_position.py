@@ -40,23 +40,32 @@ class RelativePosition:
             filter_gain, outputs=2, params=1, forgetting=forgetting
         )
         self.learning = True
-        self._theta: float | None = None
         """While ``False`` the distance is frozen and only the direction is tracked."""
         self.min_speed = min_speed
+        """m/s: a sample with ``‖ż_ij‖`` at most this is not used (``y_ij`` is undefined)."""
+        self.moving = False
+        """Whether the last sample was used (the edge was turning: ``‖ż_ij‖ > min_speed``)."""
         self.sigma = 1.0
-        self.time: float | None = None
+        """``σ = ±1``: the reversals of ``y_ij`` followed so far."""
         self.zdot: Vec2 = (0.0, 0.0)
+        """``ż_ij`` at the last sample used."""
         self.direction: Vec2 | None = None
-        """``σ y_ij`` at the last sample: the direction of ``−sign(ω₀) z_ij``."""
+        """``σ y_ij`` at the last sample used: the direction of ``−sign(ω₀) z_ij``."""
         self.last_turn = 0.0
-        """The load's rotation (rad) between the last two samples."""
+        """The load's rotation (rad) between the last two samples used."""
         self.last_dt = 0.0
+        """s: the interval between the last two samples used."""
+        self._theta: float | None = None
+        """``θ̂ = −1/(s₀ ‖z_ij‖)``, solved after each update that learns (kept in between)."""
 
-    def update(self, zdot: Vec2, time_s: float) -> None:
-        """Feed the relative velocity ``ż_ij`` sampled at ``time_s``."""
+    def update(self, zdot: Vec2, dt: float) -> None:
+        """Feed ``ż_ij`` sampled ``dt`` after the last sample used (see :attr:`moving`); the
+        first sample used only starts the filters."""
         speed = math.hypot(zdot[0], zdot[1])
         if speed <= self.min_speed:
+            self.moving = False
             return  # y_ij undefined: the load is not turning; wait.
+        self.moving = True
         y = (-zdot[1] / speed, zdot[0] / speed)
         if (
             self.direction is not None
@@ -68,7 +77,6 @@ class RelativePosition:
             self.regression.start(ty)
             self.last_turn = self.last_dt = 0.0
         else:
-            dt = time_s - self.time
             self.last_turn = angle_between(self.direction, ty)
             self.last_dt = dt
             if self.learning:
@@ -80,7 +88,6 @@ class RelativePosition:
                 self._theta = self._solve()
         self.direction = ty
         self.zdot = zdot
-        self.time = time_s
 
     def _solve(self) -> float | None:
         est = self.regression.estimate
@@ -89,26 +96,20 @@ class RelativePosition:
         return est[0]
 
     @property
-    def theta(self) -> float | None:
-        """``θ̂ = −1/(s₀ ‖z_ij‖)`` (kept between updates; the regression changes only then)."""
-        return self._theta
-
-    @property
-    def distance(self) -> float | None:
-        """``‖z_ij‖``, or ``None`` before the data determine it."""
-        theta = self.theta
-        return None if theta is None else 1.0 / abs(theta)
-
-    @property
-    def omega_sign(self) -> float:
-        """``sign(ω)`` at the last sample (``0.0`` while unknown)."""
-        theta = self.theta
-        return 0.0 if theta is None else -self.sigma * math.copysign(1.0, theta)
-
-    @property
-    def relative_position(self) -> Vec2 | None:
-        """``z_ij`` at the last sample, in the world frame."""
-        theta = self.theta
+    def estimate(self) -> Vec2 | None:
+        """``z_ij = σ y_ij / θ̂`` at the last sample used, in ``W`` then."""
+        theta = self._theta
         if theta is None or self.direction is None:
             return None
         return (self.direction[0] / theta, self.direction[1] / theta)
+
+    @property
+    def covariance(self) -> None:
+        """Not estimated yet."""
+        return None
+
+    @property
+    def distance(self) -> float | None:
+        """``‖z_ij‖ = 1/|θ̂|``, or ``None`` before the data determine it."""
+        theta = self._theta
+        return None if theta is None else 1.0 / abs(theta)

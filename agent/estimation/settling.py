@@ -6,12 +6,16 @@ once there are that many), and no single update moved it by more than that. This
 drift, not at jitter: lost messages make estimates tremble by tiny amounts from one tick to the
 next, which must not keep a converged estimate from counting as settled.
 O(size of the estimate) per update.
+
+A robot watches six of its estimates (:class:`SettleDetectors`); the team leaves a phase once
+every robot's estimates of that phase have settled (:mod:`agent.phase_machine`).
 """
 
 from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 
 class SettleDetector:
@@ -46,3 +50,44 @@ class SettleDetector:
     @property
     def settled(self) -> bool:
         return self.streak >= self.window
+
+
+@dataclass(frozen=True, slots=True)
+class SettleDetectors:
+    """The estimates a robot watches, by what they are."""
+
+    distances: SettleDetector
+    """Step 1 (and 3): every ``‖z_ij‖``."""
+    centroid: SettleDetector
+    """Step 2: ``z_i`` in the frame of the longest edge (constant once converged)."""
+    spread: SettleDetector
+    """``ξ_i = w / n`` (eq. 16)."""
+    moment: SettleDetector
+    """Step 4: ``Ĵ``."""
+    com_offset: SettleDetector
+    """Step 5: ``z_C`` at the push phase's reference instant."""
+    mass: SettleDetector
+    """Step 7: ``m̂``."""
+
+    @classmethod
+    def of(cls, window: int, tolerance: float) -> SettleDetectors:
+        """Six detectors alike (see :class:`SettleDetector`)."""
+        return cls(*(SettleDetector(window, tolerance) for _ in range(6)))
+
+    def first_settled(self) -> dict[int, int]:
+        """Paper step (1..7) → the tick its estimate first settled (steps not settled yet are
+        left out). ω (Step 3) comes from the distances, ``ṗ_C`` (Step 6) from ``z_C``."""
+        settled = {}
+        for step, detector in (
+            (1, self.distances),
+            (2, self.centroid),
+            (3, self.distances),
+            (4, self.moment),
+            (5, self.com_offset),
+            (6, self.com_offset),
+            (7, self.mass),
+        ):
+            tick = detector.first_settled
+            if tick is not None:
+                settled[step] = tick
+        return settled

@@ -1,6 +1,6 @@
 """A run's results: the JSON document, the worst errors against truth, and a text table.
 
-Everything here is computed from the final :class:`~heft.inprocess.Sample` of a run (every
+Everything here is computed from the final :class:`~simulator.inprocess.Sample` of a run (every
 robot's :class:`~agent.protocol.Estimates` and the plant's truth of the same instant) and from
 the scenario (robot ids and graph). Units are SI; vectors are ``[x, y]`` in the world frame
 ``W`` at the final estimation instant.
@@ -29,12 +29,13 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
-if TYPE_CHECKING:
-    from agent.protocol import Estimates
-    from heft.inprocess import RunOutcome
-    from simulator.plant import Truth
+from agent.estimation.geometry import Vec2
 
-Vec2 = tuple[float, float]
+if TYPE_CHECKING:
+    from agent.protocol import Estimates, Truth
+    from simulator.inprocess import RunOutcome
+    from simulator.scenario import Scenario
+
 STEPS = tuple(range(1, 8))
 """The paper's seven steps."""
 STEP_NAMES = {
@@ -144,7 +145,7 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
         "com_offset": _vec(est.com_offset),
         "com_observer": _vec(est.com_observer),
         "omega": _number(est.omega),
-        "phase": est.phase,
+        "phase": est.phase.label,
         "settled_s": {str(step): tick * period for step, tick in sorted(est.settled.items())},
     }
 
@@ -215,9 +216,11 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
         str(i): _robot_dict(outcome.final.estimates.get(i), period)
         for i in range(1, outcome.scenario.n + 1)
     }
-    return {
+    document = {
         "scenario": outcome.scenario.name,
         "converged": bool(outcome.converged),
+        "reason": outcome.reason,
+        "detail": outcome.detail,
         "sim_time_s": float(outcome.sim_time_s),
         "wall_time_s": float(outcome.wall_s),
         "n": outcome.scenario.n,
@@ -227,6 +230,67 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
         "robots": robots,
         "truth": _truth_dict(outcome),
         "errors": errors(outcome),
+        "rejections": rejection_counts(outcome.transport.get("rejections")),
+    }
+    if outcome.converged:
+        del document["detail"]  # a sentence saying why not: only when it did not
+    return document
+
+
+def failed_results_dict(
+    scenario: Scenario,
+    reason: str,
+    detail: str,
+    wall_s: float | None = None,
+    rejections: dict | None = None,
+) -> dict[str, Any]:
+    """The results JSON of a run that recorded nothing: the same keys as :func:`results_dict`,
+    ``converged`` false, the reason, and null estimates, truth and errors."""
+    n = scenario.n
+    return {
+        "scenario": scenario.name,
+        "converged": False,
+        "reason": reason,
+        "detail": detail,
+        "sim_time_s": None,
+        "wall_time_s": _number(wall_s),
+        "n": n,
+        "edges": [list(e) for e in scenario.edges],
+        "phases": [
+            {"step": step, "start_s": None, "end_s": None, "name": STEP_NAMES[step]}
+            for step in STEPS
+        ],
+        "team_phases": {},
+        "robots": {str(i): _robot_dict(None, scenario.period_s) for i in range(1, n + 1)},
+        "truth": None,
+        "errors": dict.fromkeys(ERROR_KEYS),
+        "rejections": rejection_counts(rejections),
+    }
+
+
+def rejection_counts(rejections: dict | None) -> dict[str, Any] | None:
+    """The messages a run over Zenoh rejected, with totals (None in one process: nothing there
+    is decoded). ``launcher``: by message kind; ``plant``: its count; ``robots``: each robot's
+    agent's ``decode_errors`` (undecodable, or on the wrong key) and ``rejected`` (decoded but
+    refused), as of its latest status — a robot that never sent one is absent."""
+    if rejections is None:
+        return None
+    launcher = {str(kind): int(count) for kind, count in rejections.get("launcher", {}).items()}
+    plant = rejections.get("plant")
+    robots = {
+        str(robot): {
+            "decode_errors": int(c["decode_errors"]),
+            "rejected": int(c["rejected"]),
+            "total": int(c["decode_errors"]) + int(c["rejected"]),
+        }
+        for robot, c in rejections.get("robots", {}).items()
+    }
+    return {
+        "total": sum(launcher.values()) + (plant or 0) + sum(r["total"] for r in robots.values()),
+        "launcher": launcher,
+        "launcher_total": sum(launcher.values()),
+        "plant": plant,
+        "robots": robots,
     }
 
 
@@ -273,7 +337,7 @@ def format_table(outcome: RunOutcome) -> str:
     """A fixed-width table (under 100 columns): each robot's m̂, Ĵ and ``contact_to_com``
     with their errors, the truth, the worst errors, and each paper step's start and end."""
     truth = outcome.final.truth
-    status = "converged" if outcome.converged else "NOT converged"
+    status = "converged" if outcome.converged else f"NOT converged ({outcome.reason})"
     lines = [
         f"scenario {outcome.scenario.name!r}: {status} after {outcome.sim_time_s:.2f} s simulated"
         f" ({outcome.wall_s:.2f} s wall); estimates at t = {outcome.final.time_s:.2f} s",
@@ -298,4 +362,24 @@ def format_table(outcome: RunOutcome) -> str:
     regimes = ", ".join(f"{name} {t:.2f} s" for name, t in team_phases(outcome).items())
     lines.append("(start: the first robot began the step; end: the last robot's estimate settled)")
     lines.append(f"team force regimes from: {regimes or '-'}")
+    rejected = _rejections_line(outcome.transport.get("rejections"))
+    if rejected:
+        lines.append(rejected)
     return "\n".join(lines)
+
+
+def _rejections_line(rejections: dict | None) -> str:
+    """One line of the messages rejected, when there were any (``""`` otherwise)."""
+    counts = rejection_counts(rejections)
+    if not counts or not counts["total"]:
+        return ""
+    parts = []
+    if counts["launcher_total"]:
+        kinds = ", ".join(f"{kind} {n}" for kind, n in sorted(counts["launcher"].items()) if n)
+        parts.append(f"launcher {counts['launcher_total']} ({kinds})")
+    if counts["plant"]:
+        parts.append(f"plant {counts['plant']}")
+    for robot, robot_counts in counts["robots"].items():
+        if robot_counts["total"]:
+            parts.append(f"robot {robot} {robot_counts['total']}")
+    return f"messages rejected: {counts['total']}: {'; '.join(parts)}"

@@ -34,7 +34,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 if TYPE_CHECKING:
     from agent.protocol import Estimates
-    from heft.inprocess import RunOutcome, Sample
+    from simulator.inprocess import RunOutcome, Sample
 
 PHASE_COLOURS = {"excite": "#fff3d6", "inertia": "#e3f0ff", "push": "#e6f6e6", "done": "#f0f0f0"}
 COMPONENTS = ("x", "y")

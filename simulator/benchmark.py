@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import simulator
-from heft.inprocess import RunOutcome, run_inprocess
-from heft.results import errors, step_times, team_phases
+from simulator.inprocess import RunOutcome, run_inprocess
+from simulator.results import errors, step_times, team_phases
 from simulator.scenario import Scenario
 
 PAPER_SCENARIO = Path(simulator.__file__).resolve().parent / "scenarios" / "paper.toml"
@@ -217,8 +217,8 @@ def run_zenoh_benchmark(
     with one process per robot over Zenoh on 127.0.0.1."""
     import io
 
-    from heft.launcher import run_zenoh
     from simulator.generate import ring_scenario
+    from simulator.launcher import run_zenoh
     from simulator.scenario import load_scenario
 
     lockstep = []

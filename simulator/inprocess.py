@@ -15,11 +15,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from agent.agent import DONE, PHASES, Agent
+from agent.agent import Agent
 from agent.config import AgentConfig
-from agent.protocol import Estimates
+from agent.protocol import Estimates, Phase, Truth
 from agent.transport import InMemoryTransport, Transport
-from simulator.plant import Plant, Truth
+from simulator.history import History
+from simulator.plant import Plant
 from simulator.scenario import Scenario
 
 Progress = Callable[[int, float, list[Agent]], None]
@@ -49,6 +50,11 @@ class RunOutcome:
     phase_ticks: dict[str, int] = field(default_factory=dict)
     transport: dict = field(default_factory=dict)
     """What the transport reported (the Zenoh run: the plant's counters and latencies)."""
+    reason: str = ""
+    """Why the run did not converge (``""`` when it did), short and machine-readable: out of
+    simulated time, a robot lost, a process lost, interrupted (see the README's exit status)."""
+    detail: str = ""
+    """The same for people: one sentence (``""`` when it converged)."""
 
     @property
     def sim_time_s(self) -> float:
@@ -85,7 +91,7 @@ def run_inprocess(
     agents = make_agents(scenario)
     transport = transport or InMemoryTransport(scenario.n, scenario.edges)
     max_ticks = round(scenario.run.max_time_s / scenario.period_s)
-    history: list[Sample] = []
+    history: History[Sample] = History()
     phase_ticks: dict[str, int] = {}
     started = time.perf_counter()
     converged = False
@@ -94,41 +100,54 @@ def run_inprocess(
     finishing = False  # done (or out of time): stop at the next sample of aligned estimates
     give_up = max_ticks + ALIGN_TICKS
     k = 0
-    while k <= give_up:
-        measurements = plant.measure()
-        shares = []
-        for agent, measurement in zip(agents, measurements):
-            command, share = agent.step(measurement, transport.receive(agent.robot))
-            plant.command(agent.robot, command.force)
-            shares.append(share)
-        for share in shares:
-            transport.send(share)
-        # Estimates of tick k - 1, unless an agent lags behind a late or lost message.
-        if pending is not None and all(a.instant == k - 1 for a in agents):
-            final = _sample(k - 1, scenario, pending, agents)
-            history.append(final)
-            if finishing:
-                break
-        team_phase = min(a.phase for a in agents)
-        phase_ticks.setdefault(PHASES[team_phase], k)
-        if progress is not None and k % progress_every == 0:
-            progress(k, k * scenario.period_s, agents)
-        if not finishing and (team_phase >= DONE or k >= max_ticks):
-            finishing = True
-            converged = all(a.phase == DONE for a in agents)
-            give_up = k + ALIGN_TICKS
-        # The plant has not moved since it was sampled: its truth is that of tick k.
-        pending = plant.truth() if (k % record_every == 0 or finishing) else None
-        plant.advance()
-        k += 1
+    interrupted = False
+    try:
+        while k <= give_up:
+            measurements = plant.measure()
+            shares = []
+            for agent, measurement in zip(agents, measurements):
+                command, share = agent.step(measurement, transport.receive(agent.robot))
+                plant.command(agent.robot, command.force)
+                shares.append(share)
+            for share in shares:
+                transport.send(share)
+            # Estimates of tick k - 1, unless an agent lags behind a late or lost message.
+            if pending is not None and all(a.instant == k - 1 for a in agents):
+                final = _sample(k - 1, scenario, pending, agents)
+                history.append(final)
+                if finishing:
+                    break
+            team_phase = min(a.phase for a in agents)
+            phase_ticks.setdefault(team_phase.label, k)
+            if progress is not None and k % progress_every == 0:
+                progress(k, k * scenario.period_s, agents)
+            if not finishing and (team_phase >= Phase.DONE or k >= max_ticks):
+                finishing = True
+                converged = all(a.phase == Phase.DONE for a in agents)
+                give_up = k + ALIGN_TICKS
+            # The plant has not moved since it was sampled: its truth is that of tick k.
+            pending = plant.truth() if (k % record_every == 0 or finishing) else None
+            plant.advance()
+            k += 1
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM/SIGHUP turned into it: keep what was done
+        if final is None:
+            raise
+        interrupted = True
     assert final is not None
+    if interrupted:
+        reason = "interrupted"
+    elif not converged:
+        reason = f"out of simulated time (run.max_time_s = {scenario.run.max_time_s:g} s)"
+    else:
+        reason = ""
     return RunOutcome(
         scenario=scenario,
-        converged=converged,
+        converged=converged and not interrupted,
+        reason=reason,
         ticks=final.truth.tick,
         wall_s=time.perf_counter() - started,
         final=final,
-        history=history,
+        history=_with_final(history, final),
         phase_ticks=phase_ticks,
     )
 
@@ -139,3 +158,11 @@ def _sample(instant: int, scenario: Scenario, truth: Truth, agents: list[Agent])
         truth=truth,
         estimates={a.robot: a.estimates() for a in agents},
     )
+
+
+def _with_final(history: History[Sample], final: Sample) -> list[Sample]:
+    """The recorded samples, ending with the final one (a long run records only some)."""
+    samples = list(history)
+    if not samples or samples[-1] is not final:
+        samples.append(final)
+    return samples

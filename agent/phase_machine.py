@@ -1,0 +1,269 @@
+"""The team's phases (force regimes) and the force each robot applies in them.
+
+The phases are switched by the team's barrier (:mod:`agent.coordination`) once every robot's
+own estimates have settled; every robot switches at the same agreed tick:
+
+======== ======================================= ===========================================
+phase     forces                                  estimates that settle in it
+======== ======================================= ===========================================
+excite    kick, then geometry-free spin-up        Step 1 ``z_ij``, Step 2 ``z_i``, Step 3 ω, ``w``
+inertia   ``f_i = ±k z_i⊥`` (eq. 14)                Step 4 ``J``
+push      common ``f`` (eq. 17)                   Step 5 ``z_C``, Step 6 ``ṗ_C``, Step 7 ``m``
+done      zero: the load coasts                   (tracking goes on)
+halted    zero                                    (a robot was lost: the team stops)
+======== ======================================= ===========================================
+
+``halted`` is entered by :meth:`PhaseMachine.halt` when a neighbour is lost, and reaches the
+rest of the team through the barrier's catch-up rule (it is the highest phase). The paper
+assumes ``n`` robots that all push; estimates made without one of them would be wrong, so the
+team stops and says so rather than carrying on.
+
+The force laws:
+
+- *excite*: for ``kick_duration_s`` a seeded random kick, then the spin-up
+  ``f_i = k Σ_j (1 − ‖ż_ij‖/v*) ż_ij`` (:mod:`agent.estimation.excitation`);
+- *inertia*: ``f_i = ±k z_i⊥`` with ``k = F/√w`` (eq. 14, :mod:`agent.estimation.inertia`): the
+  torque ``±k w`` speeds the turn the load already has up until ``|ω|`` reaches
+  ``inertia_max_omega``, then brakes it down to half of that, and so on. ``ω`` at the tick is
+  predicted from its last measurement, the torque applied since and ``Ĵ``: every robot
+  predicts the same value, so they all reverse at the same tick;
+- *push*: the common force ``f = max(f̄_y Ĵ/n, push_min_force)`` along ``push_direction``, at
+  most ``max_force`` (eq. 17 and Sec. VI, ``f_y = J/n`` for ``f̄_y = 1``).
+
+Every command is bounded by ``max_force`` (:func:`agent.safety.saturate`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Protocol
+
+from agent.config import AgentConfig
+from agent.coordination import PhaseBarrier
+from agent.estimation.excitation import kick_force, spin_up_force
+from agent.estimation.geometry import Vec2, rotate
+from agent.estimation.inertia import inertia_force
+from agent.protocol import Phase, Share
+from agent.safety import saturate
+
+if TYPE_CHECKING:
+    from agent.estimation.settling import SettleDetectors
+
+
+class OwnEstimates(Protocol):
+    """What the phase machine reads of its own robot's estimates (an
+    :class:`~agent.pipeline.EstimationPipeline`)."""
+
+    instant: int
+    """The estimation instant."""
+    omega: float | None
+    """``ω`` at the estimation instant (Step 3)."""
+    measured: int | None
+    """The last instant whose ``ω`` was measured."""
+    zdot: dict[int, Vec2]
+    """``ż_ij`` at the estimation instant, by neighbour."""
+    settle: SettleDetectors
+
+    @property
+    def centroid(self) -> Vec2:
+        """``z_i`` at the estimation instant (Step 2)."""
+        ...
+
+    @property
+    def spread(self) -> float:
+        """``w / n`` (eq. 16)."""
+        ...
+
+    @property
+    def moment(self) -> float | None:
+        """``Ĵ`` (Step 4)."""
+        ...
+
+
+class PhaseMachine:
+    """One robot's phase, when it was entered, and the force law of each phase."""
+
+    def __init__(self, config: AgentConfig):
+        tuning = config.tuning
+        self.tuning = tuning
+        self.n = config.n
+        self.dt = config.period_s
+        self.barrier = PhaseBarrier(config.robot, config.n, tuning.switch_margin_ticks)
+        self.entered: dict[Phase, int] = {Phase.EXCITE: 0}
+        """The tick at which each phase was entered (phases skipped are not listed)."""
+        self.kick_ticks = round(tuning.kick_duration_s / self.dt)
+        self.kick = kick_force(config.seed, config.robot, tuning.kick_force)
+        self.inertia_min_ticks = round(tuning.inertia_min_s / self.dt)
+        self.spin_sign = 0.0
+        """``sign(ω)`` when the inertia phase began: the torque first speeds that turn up."""
+        self.inertia_gain = 0.0
+        """``k = F/√w`` of eq. (14)."""
+        self.inertia_torque = 0.0
+        """``sign(ω) k w``: the team's torque while speeding up."""
+        self.direction = 1.0
+        """``+1`` while the inertia phase speeds the turn up, ``−1`` while it brakes."""
+        self._torque: dict[int, float] = {}
+        """The team's torque (``±k w``) during each tick of the inertia phase."""
+        self.moment_used: float | None = None
+        """The ``Ĵ`` the push force was sized with (Steps 5 and 7 use it too)."""
+        self.push: Vec2 = (0.0, 0.0)
+        """The common force ``f`` of the push phase (eq. 17)."""
+        self._ready: Callable[[int, OwnEstimates], bool]
+        self._law: Callable[[int, OwnEstimates], Vec2]
+        self._begin(Phase.EXCITE)
+
+    @property
+    def phase(self) -> Phase:
+        return self.barrier.phase
+
+    @property
+    def since(self) -> int:
+        """The tick at which the current phase was entered."""
+        return self.entered[self.barrier.phase]
+
+    def phase_at(self, tick: int) -> Phase:
+        """The phase during tick ``tick`` (as far as this robot knows)."""
+        phase = Phase.EXCITE
+        for p, start in self.entered.items():
+            if start <= tick and p > phase:
+                phase = p
+        return phase
+
+    # ---------------------------------------------------------------- switching
+    def ready(self, k: int, own: OwnEstimates) -> bool:
+        """Whether this robot is ready to leave its phase at tick ``k``: the phase's estimates
+        have settled (and the phase has lasted long enough)."""
+        return self._ready(k, own)
+
+    def step(self, k: int, own: OwnEstimates, shares: Iterable[Share]) -> bool:
+        """Tick ``k`` of the barrier, on this robot's readiness and its neighbours' latest
+        messages; returns ``True`` if a new phase begins at ``k`` (its force law is then set
+        up from ``own``)."""
+        if not self.barrier.step(k, self._ready(k, own), shares):
+            return False
+        phase = self.barrier.phase
+        if not self._can_enter(phase, own):
+            # Caught up (or told) to a phase this robot has not the estimates for: it could
+            # only push wrongly, so it stops the team instead.
+            self.halt(k)
+            return True
+        self.entered[phase] = k
+        if phase == Phase.INERTIA:
+            w = self.n * own.spread
+            self.inertia_gain = self.tuning.inertia_force / math.sqrt(w)
+            self.spin_sign = math.copysign(1.0, own.omega or 1.0)
+            self.inertia_torque = self.spin_sign * self.inertia_gain * w
+        elif phase == Phase.PUSH:
+            self.moment_used = own.moment
+            t = self.tuning
+            magnitude = max(t.push_fbar * self.moment_used / self.n, t.push_min_force)
+            self.push = _unit(t.push_direction, min(magnitude, t.max_force))
+        self._begin(phase)
+        return True
+
+    @staticmethod
+    def _can_enter(phase: Phase, own: OwnEstimates) -> bool:
+        """Whether ``own`` has what ``phase``'s force law needs: ``w > 0`` for the inertia
+        phase (eq. 14), ``Ĵ`` for the push (eq. 17)."""
+        if phase == Phase.INERTIA:
+            return own.spread > 0.0
+        if phase == Phase.PUSH:
+            return own.moment is not None
+        return True
+
+    def halt(self, tick: int) -> None:
+        """Stop the team from tick ``tick`` on (see the module docstring)."""
+        self.barrier.halt()
+        self.entered.setdefault(Phase.HALTED, tick)
+        self._begin(Phase.HALTED)
+
+    def force(self, k: int, own: OwnEstimates) -> Vec2:
+        """The force to apply during tick ``k``, bounded by ``max_force``."""
+        return saturate(self._law(k, own), self.tuning.max_force)
+
+    # ---------------------------------------------------------------- each phase's laws
+    def _begin(self, phase: Phase) -> None:
+        """Take up ``phase``'s readiness test and force law (looked up once, not every tick)."""
+        laws = {
+            Phase.EXCITE: (self._excite_ready, self._excite_force),
+            Phase.INERTIA: (self._inertia_ready, self._inertia_force),
+            Phase.PUSH: (self._push_ready, self._push_force),
+        }
+        self._ready, self._law = laws.get(phase, (_never_ready, _no_force))
+
+    def _excite_ready(self, k: int, own: OwnEstimates) -> bool:
+        s = own.settle
+        return (
+            k >= self.kick_ticks
+            and s.distances.settled
+            and s.centroid.settled
+            and s.spread.settled
+            and own.spread > 0.0
+        )
+
+    def _excite_force(self, k: int, own: OwnEstimates) -> Vec2:
+        """The kick, then the spin-up."""
+        if k < self.kick_ticks:
+            return self.kick
+        t = self.tuning
+        return spin_up_force(t.spin_gain, t.spin_speed, own.zdot.values())
+
+    def _inertia_ready(self, k: int, own: OwnEstimates) -> bool:
+        return own.settle.moment.settled and k - self.since >= self.inertia_min_ticks
+
+    def _inertia_force(self, k: int, own: OwnEstimates) -> Vec2:
+        """Eq. (14) with the torque's sign for tick ``k`` (records the team's torque)."""
+        # Speed the turn up until |ω| reaches the limit, then brake down to half of it.
+        speed = abs(self.omega_at(k, own))
+        limit = self.tuning.inertia_max_omega
+        if speed >= limit:
+            self.direction = -1.0
+        elif speed <= 0.5 * limit:
+            self.direction = 1.0
+        self._torque[k] = self.direction * self.inertia_torque
+        # z_i turned to the middle of [t_k, t_k+1): the torque then averages ±k w.
+        lead = (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
+        z = rotate(own.centroid, lead)
+        return inertia_force(self.direction * self.spin_sign * self.inertia_gain, z)
+
+    def _push_ready(self, k: int, own: OwnEstimates) -> bool:
+        s = own.settle
+        return s.com_offset.settled and s.mass.settled
+
+    def _push_force(self, k: int, own: OwnEstimates) -> Vec2:
+        return self.push
+
+    # ---------------------------------------------------------------- for Step 4
+    def omega_at(self, tick: int, own: OwnEstimates) -> float:
+        """ω at ``t_tick``, predicted from the last instant it was measured with the torque the
+        team applied since (eq. 15) and ``Ĵ``: every robot, whichever messages it has received,
+        predicts the same value, so they all take the same decisions."""
+        omega = own.omega or 0.0
+        moment = own.moment
+        if own.measured is None or moment is None:
+            return omega
+        impulse = sum(self._torque.get(t, 0.0) for t in range(own.measured, tick))
+        return omega + impulse * self.dt / moment
+
+    def mean_torque(self, first: int, last: int) -> float:
+        """The team's mean torque (Step 4's input ``±k w``) over ticks ``first..last − 1``."""
+        torques = [self._torque.get(t, 0.0) for t in range(first, last)]
+        return sum(torques) / len(torques)
+
+    def forget(self, before: int) -> None:
+        """Drop the torque of tick ``before`` (too old to be asked for)."""
+        self._torque.pop(before, None)
+
+
+def _never_ready(k: int, own: OwnEstimates) -> bool:
+    return False
+
+
+def _no_force(k: int, own: OwnEstimates) -> Vec2:
+    return (0.0, 0.0)
+
+
+def _unit(direction: tuple[float, float], magnitude: float) -> Vec2:
+    d = math.hypot(direction[0], direction[1])
+    return (magnitude * direction[0] / d, magnitude * direction[1] / d)

@@ -1,0 +1,79 @@
+"""What every long-lived process of the project does the same way: stop on a signal, hand what
+its network threads receive to its main thread, and count and log the messages it had to
+reject without flooding its log."""
+
+from __future__ import annotations
+
+import logging
+import queue
+import signal
+import threading
+from collections import Counter
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
+    """An event set by SIGINT, SIGTERM or SIGHUP (call from the main thread).
+
+    The handler runs in the main thread between two bytecodes, possibly while that thread holds
+    the event's own lock (inside ``wait`` or ``set``); setting the event from the handler could
+    then deadlock, so it is set from a short-lived thread instead."""
+    stop = stop or threading.Event()
+
+    def handler(*_: object) -> None:
+        threading.Thread(target=stop.set, name="stop-signal", daemon=True).start()
+
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, handler)
+    return stop
+
+
+class RejectLog:
+    """Counts rejected messages by what they were (e.g. ``"measurement"``) and why (e.g.
+    ``"undecodable"``, ``"tick out of window"``), and logs them without flooding the log: the
+    first ``first`` of each kind, then one in ``every``."""
+
+    def __init__(self, log: logging.Logger, who: str, first: int = 10, every: int = 1000):
+        self.log = log
+        self.who = who
+        self.first = first
+        self.every = every
+        self.counts: Counter[str] = Counter()
+        """Rejections by what was rejected."""
+        self.reasons: Counter[tuple[str, str]] = Counter()
+        """Rejections by what and why."""
+
+    def __call__(self, what: str, reason: object, why: str = "undecodable") -> None:
+        self.counts[what] += 1
+        self.reasons[what, why] += 1
+        count = self.counts[what]
+        if count <= self.first or count % self.every == 0:
+            self.log.warning("%s: rejected %s #%d (%s): %s", self.who, what, count, why, reason)
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+
+class EventQueue:
+    """Where a process's Zenoh callbacks leave what they receive, for its main thread.
+
+    Callbacks run on Zenoh's threads and must stay tiny (a busy thread holding the GIL delays
+    them by milliseconds): they only :meth:`put`; the main thread :meth:`drain`\\ s.
+    """
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+
+    def put(self, event) -> None:
+        self._queue.put(event)
+
+    def drain(self, handle, timeout: float | None) -> None:
+        """Wait up to ``timeout`` s for an event, then ``handle`` it and every other queued."""
+        try:
+            handle(self._queue.get(timeout=timeout))
+            while True:
+                handle(self._queue.get_nowait())
+        except queue.Empty:
+            pass

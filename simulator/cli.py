@@ -1,0 +1,651 @@
+"""The simulator package's commands::
+
+    heft run SCENARIO [--transport inprocess|zenoh] [--out FILE] [--plot DIR] [--quiet]
+    heft scenario generate SEED [-o FILE]
+    heft bench [SCENARIO] [--repeat N] [--transport zenoh] [--generated N]
+    heft sim SCENARIO [--team NAME] [--clock lockstep|realtime] [Zenoh options]
+    heft demo [--out FILE] [--plot DIR] [--quiet]
+
+Exit status (the README's table): 0 success (``run``: every robot converged), 1 ``run`` did
+not converge (the last line and the results' ``reason`` say why), 2 bad input (a one-line
+``heft: error: ...`` on stderr), 130 interrupted (SIGINT, SIGTERM or SIGHUP).
+
+Building the parser imports nothing heavy (no pymunk, numpy or matplotlib): the handlers
+import what they run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
+
+from agent.command_line import (
+    PROG,
+    HelpFormatter,
+    UsageError,
+    add_zenoh_options,
+    check_writable,
+    setup_logging,
+    write_text,
+    zenoh_settings,
+)
+from agent.protocol import CLOCKS, Phase
+from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings
+from simulator.scenario import Scenario, ScenarioError, load_scenario, scenario_to_toml
+
+if TYPE_CHECKING:
+    from agent.agent import Agent
+    from agent.faults import FaultSettings
+    from simulator.inprocess import Progress, RunOutcome
+
+PROGRESS_EVERY_S = 5.0
+"""Simulated seconds between two progress lines of ``heft run``."""
+
+
+def _load(path: str) -> Scenario:
+    """The scenario at ``path``; a :class:`UsageError` naming the problem if it is invalid."""
+    try:
+        return load_scenario(path)
+    except ScenarioError as err:
+        raise UsageError(str(err)) from None
+
+
+# ------------------------------------------------------------------------------ progress lines
+def _team_phase(agents: Sequence[Agent]) -> str:
+    """``'inertia'`` when every robot is in that phase, else e.g. ``'excite: 1,2; inertia: 3'``."""
+    robots: dict[str, list[int]] = defaultdict(list)
+    for agent in agents:
+        robots[Phase(agent.phase).label].append(agent.robot)
+    if len(robots) == 1:
+        return next(iter(robots))
+    return "; ".join(f"{name}: {','.join(map(str, ids))}" for name, ids in robots.items())
+
+
+def _progress_printer(started: float, stream: TextIO) -> Progress:
+    """A :data:`simulator.inprocess.Progress` callback printing one line per call to ``stream``."""
+
+    def report(tick: int, time_s: float, agents: list[Agent]) -> None:
+        if tick == 0:
+            return
+        wall = time.perf_counter() - started
+        print(
+            f"{PROG}: t = {time_s:6.1f} s simulated, phase {_team_phase(agents)},"
+            f" {wall:.2f} s wall",
+            file=stream,
+            flush=True,
+        )
+
+    return report
+
+
+# ------------------------------------------------------------------------------ heft run
+INTERRUPTED = "interrupted"
+EXIT_INTERRUPTED = 130
+"""Ctrl-C, SIGTERM and SIGHUP alike (128 + SIGINT, as shells report an interrupted command)."""
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """``heft run``: simulate a scenario; write the results JSON (whatever the verdict, and on
+    SIGINT, SIGTERM or SIGHUP), print the table, write the plots, print the verdict last."""
+    from simulator.results import failed_results_dict, format_table, results_dict
+
+    # From here on a signal only asks the run to stop: over Zenoh the launcher stops its
+    # processes and returns what it recorded; in one process the loop is interrupted where it
+    # is (see _run). Either way the results are written.
+    with _StopSignals() as stop:
+        scenario = _load(args.scenario)
+        faults = _faults(args, scenario)
+        out = None if args.out is None else Path(args.out)
+        if out is not None:
+            check_writable(out)  # never creates the file: it appears, whole, at the end
+        if args.plot is not None:
+            check_writable(Path(args.plot), directory=True)
+        started = time.perf_counter()
+        if not args.quiet:
+            print(f"{PROG}: running {scenario.name!r} ({scenario.n} robots)", file=sys.stderr)
+        outcome: RunOutcome | None = None
+        try:
+            outcome = _run(args, scenario, faults, started, stop)
+            reason, detail = outcome.reason, outcome.detail
+            rejections = outcome.transport.get("rejections")
+        except _NothingRecorded as failed:
+            reason, detail, rejections = failed.reason, failed.detail, failed.rejections
+        if reason == INTERRUPTED:
+            detail = f"stopped by {stop.received or 'KeyboardInterrupt'}"
+        elif reason and not detail:
+            detail = _detail(reason)
+        if outcome is not None:
+            outcome.detail = detail
+            document = results_dict(outcome)
+        else:
+            wall = time.perf_counter() - started
+            document = failed_results_dict(scenario, reason, detail, wall, rejections)
+        if out is not None:
+            write_text(out, json.dumps(document, indent=2, allow_nan=False) + "\n")
+        if outcome is not None:
+            print(format_table(outcome))
+        if out is not None:
+            print(f"wrote results to {out}")
+        if outcome is not None and args.plot is not None and reason != INTERRUPTED:
+            try:
+                with stop.raising():  # the plots take seconds: a signal cuts them short
+                    for path in _write_plots(outcome, Path(args.plot)):
+                        print(f"wrote plot {path}")
+            except KeyboardInterrupt:
+                reason, detail = INTERRUPTED, f"plots cut short by {stop.received}"
+    return _say_verdict(reason, detail, out, recorded=outcome is not None)
+
+
+def _say_verdict(reason: str, detail: str, out: Path | None, recorded: bool) -> int:
+    """The verdict as the last line on stderr; the exit status (README: exit status)."""
+    if not reason:
+        return 0
+    if reason == INTERRUPTED:
+        kept = "the results recorded so far are kept" if recorded else "nothing was recorded"
+        where = f" in {out}" if out is not None and recorded else ""
+        print(f"{PROG}: {reason}: {detail}; {kept}{where}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    print(f"{PROG}: not converged: {reason}: {detail}", file=sys.stderr)
+    return 1
+
+
+def _detail(reason: str) -> str:
+    """A sentence for a reason that came without one (the in-process run's)."""
+    if reason.startswith("out of simulated time"):
+        return "the team was not done within the scenario's run.max_time_s"
+    return reason
+
+
+class _NothingRecorded(Exception):
+    """A run that ended before recording any instant (the verdict says why)."""
+
+    def __init__(self, reason: str, detail: str, rejections: dict | None = None):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+        self.rejections = rejections
+
+
+def _run(
+    args: argparse.Namespace,
+    scenario: Scenario,
+    faults: FaultSettings,
+    started: float,
+    stop: _StopSignals,
+) -> RunOutcome:
+    """The run of ``heft run``, in one process or over Zenoh; :class:`_NothingRecorded` when
+    it recorded nothing."""
+    if args.transport == "zenoh":
+        return _run_zenoh(args, scenario, faults, stop.event)
+    from simulator.inprocess import run_inprocess
+
+    progress = None if args.quiet else _progress_printer(started, sys.stderr)
+    every = max(1, round(PROGRESS_EVERY_S / scenario.period_s))
+    transport = None
+    if faults.active:
+        from agent.faults import FaultyTransport
+        from agent.transport import InMemoryTransport
+
+        transport = FaultyTransport(InMemoryTransport(scenario.n, scenario.edges), faults)
+    try:
+        with stop.raising():
+            return run_inprocess(
+                scenario, transport=transport, progress=progress, progress_every=every
+            )
+    except KeyboardInterrupt:  # before its first instant: nothing to keep
+        raise _NothingRecorded(INTERRUPTED, "") from None
+
+
+class _StopSignals:
+    """While entered: SIGINT, SIGTERM and SIGHUP stop a run alike (as Ctrl-C does). Each sets
+    :attr:`event` (and :attr:`received` names the first); inside :meth:`raising` it also
+    raises ``KeyboardInterrupt`` where the main thread is."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.received: str | None = None
+        self._raise = False
+        self._previous: dict = {}
+
+    def _handle(self, signum: int, frame) -> None:
+        # Signals come in bursts, and a handler can run again inside itself: only the first
+        # sets the event (whose lock is not re-entrant).
+        if self.received is None:
+            self.received = signal.Signals(signum).name
+            self.event.set()
+        if self._raise:
+            raise KeyboardInterrupt
+
+    def __enter__(self) -> _StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = {sig: signal.signal(sig, self._handle) for sig in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    @contextmanager
+    def raising(self):
+        """Inside this block a signal raises ``KeyboardInterrupt`` (at once if one came)."""
+        self._raise = True
+        try:
+            if self.event.is_set():
+                raise KeyboardInterrupt
+            yield
+        finally:
+            self._raise = False
+
+
+def _faults(args: argparse.Namespace, scenario: Scenario) -> FaultSettings:
+    from agent.faults import FaultSettings
+
+    if not 0.0 <= args.drop < 1.0:
+        raise UsageError(f"--drop: expected a probability in [0, 1), got {args.drop:g}")
+    if not 0.0 <= args.delay_ms <= 10_000.0:
+        raise UsageError(f"--delay-ms: expected a number in [0, 10000], got {args.delay_ms:g}")
+    if args.delay_ms and args.transport != "zenoh":
+        raise UsageError("--delay-ms needs --transport zenoh (in one process time is simulated)")
+    return FaultSettings(drop=args.drop, delay_s=args.delay_ms / 1000.0, seed=scenario.run.seed)
+
+
+def _run_zenoh(
+    args: argparse.Namespace,
+    scenario: Scenario,
+    faults: FaultSettings,
+    stop: threading.Event,
+) -> RunOutcome:
+    """The run over Zenoh (:func:`simulator.launcher.run_zenoh`); it stops once ``stop`` is
+    set. :class:`_NothingRecorded` when it recorded nothing."""
+    from simulator.launcher import RunFailed, run_zenoh
+
+    def report(time_s: float, phases: str) -> None:
+        if not args.quiet:
+            print(
+                f"{PROG}: t = {time_s:6.1f} s simulated, phases so far: {phases}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    stream = sys.stderr if not args.quiet else open(os.devnull, "w")  # noqa: SIM115
+    try:
+        return run_zenoh(
+            scenario,
+            clock=args.clock,
+            faults=faults,
+            progress=report,
+            log_stream=stream,
+            stop=stop,
+        )
+    except RunFailed as failed:
+        rejections = failed.transport.get("rejections")
+        raise _NothingRecorded(failed.reason, failed.detail, rejections) from None
+    finally:
+        if stream is not sys.stderr:
+            stream.close()
+
+
+def _write_plots(outcome: RunOutcome, directory: Path) -> list[Path]:
+    """Write the figures of ``outcome`` into ``directory``; a :class:`UsageError` on failure."""
+    from simulator.plots import write_plots
+
+    try:
+        return write_plots(outcome, directory)
+    except OSError as err:
+        raise UsageError(f"{directory}: cannot write the plots ({err.strerror or err})") from None
+
+
+# ------------------------------------------------------------------------------ heft demo
+def cmd_demo(args: argparse.Namespace) -> int:
+    """``heft demo``: ``heft run`` of the paper's scenario over Zenoh on the wall clock."""
+    from simulator.benchmark import PAPER_SCENARIO
+
+    args.scenario = str(PAPER_SCENARIO)
+    args.transport = "zenoh"
+    args.clock = "realtime"
+    args.drop = 0.0
+    args.delay_ms = 0.0
+    return cmd_run(args)
+
+
+# ------------------------------------------------------------------------------ heft scenario
+def cmd_generate(args: argparse.Namespace) -> int:
+    """``heft scenario generate``: write the random scenario of a seed as TOML."""
+    from agent.config import MAX_SEED, Bound
+    from simulator.generate import generate_scenario
+
+    Bound(0, MAX_SEED).check("SEED", args.seed)
+    text = scenario_to_toml(generate_scenario(args.seed))
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        write_text(Path(args.output), text)
+        print(f"wrote scenario {args.output}", file=sys.stderr)
+    return 0
+
+
+# ------------------------------------------------------------------------------ heft bench
+def cmd_bench(args: argparse.Namespace) -> int:
+    """``heft bench``: run a scenario several times and report accuracy and speed."""
+    from agent.config import Bound
+    from simulator.benchmark import DEFAULT_REPEAT, PAPER_SCENARIO, format_report, run_benchmark
+
+    if args.repeat is not None:
+        Bound(1, 1000, "runs").check("--repeat", args.repeat)
+    if args.generated is not None:
+        Bound(1, 1000, "scenarios").check("--generated", args.generated)
+        return _bench_generated(args.generated)
+    if args.transport == "zenoh":
+        return _bench_zenoh(args.sizes)
+    repeat = DEFAULT_REPEAT if args.repeat is None else args.repeat
+    source = str(PAPER_SCENARIO) if args.scenario is None else args.scenario
+    scenario = _load(source)
+
+    def on_run(k: int, outcome: RunOutcome) -> None:
+        _say_run(f"run {k}/{repeat}", outcome)
+
+    report = run_benchmark(scenario, repeat, source=source, on_run=on_run)
+    print(format_report(report))
+    return 0
+
+
+def _say_run(label: str, outcome: RunOutcome) -> None:
+    """One progress line on stderr per benchmark run."""
+    state = "converged" if outcome.converged else "NOT converged"
+    print(
+        f"{PROG}: {label}: {state}, {outcome.sim_time_s:.2f} s simulated in"
+        f" {outcome.wall_s:.2f} s wall",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _bench_zenoh(sizes: str) -> int:
+    from simulator.benchmark import format_zenoh_report, run_zenoh_benchmark
+
+    try:
+        counts = [int(s) for s in sizes.split(",")]
+    except ValueError:
+        raise UsageError(f"--sizes: expected numbers like 4,8,16, got {sizes!r}") from None
+    for n in counts:
+        if n < 3 or 32 % n:
+            raise UsageError(f"--sizes: a ring team needs n >= 3 dividing 32, got {n}")
+
+    print(format_zenoh_report(run_zenoh_benchmark(counts, _say_run)))
+    return 0
+
+
+def _bench_generated(count: int) -> int:
+    from simulator.benchmark import format_generated, run_generated
+
+    if count < 1:
+        raise UsageError(f"--generated must be at least 1, got {count}")
+
+    def on_run(seed: int, outcome: RunOutcome) -> None:
+        _say_run(f"seed {seed}, {outcome.scenario.n} robots", outcome)
+
+    outcomes = run_generated(count, on_run)
+    print(format_generated(outcomes))
+    return 0 if all(o.converged for o in outcomes) else 1
+
+
+# ------------------------------------------------------------------------------ heft sim
+def cmd_sim(args: argparse.Namespace) -> int:
+    """``heft sim``: the plant of a scenario as a process on Zenoh."""
+    import dataclasses
+
+    from agent.config import Bound, bounds
+    from agent.process import stop_on_signals
+    from agent.protocol import Keys
+    from simulator.node import run_plant
+
+    scenario = _load(args.scenario)
+    Bound(0, 3600, "s", open_low=True).check("--start-timeout", args.start_timeout)  # NaN too
+    base = ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,))
+    if args.connect_timeout_ms is not None:
+        timeout = bounds(ZenohSettings)["connect_timeout_ms"]
+        timeout.check("--connect-timeout-ms", args.connect_timeout_ms)
+        base = dataclasses.replace(base, connect_timeout_ms=args.connect_timeout_ms)
+    team = args.team or scenario.name
+    try:
+        Keys(team)
+    except ValueError as err:
+        source = "--team" if args.team else f"{args.scenario}: name (the default --team)"
+        raise UsageError(f"{source}: {err}") from None
+    settings = zenoh_settings(args, base)
+    setup_logging()
+    return run_plant(
+        scenario,
+        team,
+        args.clock,
+        settings,
+        stop_on_signals(),
+        args.start_timeout,
+    )
+
+
+# ------------------------------------------------------------------------------ the parsers
+def register(commands: argparse._SubParsersAction) -> None:
+    """Add ``heft run``, ``scenario``, ``bench``, ``sim`` and ``demo`` (entry point of the
+    group ``heft.commands``)."""
+    _add_run(commands)
+    _add_scenario(commands)
+    _add_bench(commands)
+    _add_sim(commands)
+    _add_demo(commands)
+
+
+def _add_run(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "run",
+        help="simulate a scenario and print the estimates against the truth",
+        formatter_class=HelpFormatter,
+        description=(
+            "Simulate SCENARIO: one agent per robot and a pymunk plant, until every robot has\n"
+            "finished the paper's seven steps or the scenario's run.max_time_s. By default in\n"
+            "this process over the in-memory transport; with --transport zenoh as separate\n"
+            "processes (a Zenoh router, the plant, one agent per robot) on 127.0.0.1. Prints\n"
+            "a table of every robot's estimates (m, J, contact-to-COM offset) and their errors\n"
+            "against the ground truth, and when each step started and ended.\n\n"
+            "Exit status: 0 converged, 1 not converged (out of time, or a robot was lost),\n"
+            "2 bad scenario or arguments, 130 interrupted."
+        ),
+        epilog=(
+            "examples:\n"
+            "  heft run simulator/scenarios/paper.toml --out results.json --plot plots\n"
+            "  heft run simulator/scenarios/paper.toml --transport zenoh --drop 0.1"
+        ),
+    )
+    parser.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
+    parser.add_argument(
+        "--transport",
+        choices=("inprocess", "zenoh"),
+        default="inprocess",
+        help="inprocess: one process; zenoh: one process per robot (default: inprocess)",
+    )
+    parser.add_argument(
+        "--clock",
+        choices=CLOCKS,
+        default="lockstep",
+        help="with zenoh: lockstep (deterministic, faster than real time) or realtime"
+        " (the wall clock) (default: lockstep)",
+    )
+    parser.add_argument(
+        "--drop",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="probability that a message between agents is lost (default: 0)",
+    )
+    parser.add_argument(
+        "--delay-ms",
+        type=float,
+        default=0.0,
+        metavar="MS",
+        help="with zenoh: delay added to every message between agents (default: 0)",
+    )
+    _add_output_options(parser)
+    parser.set_defaults(handler=cmd_run)
+
+
+def _add_output_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--out",
+        metavar="FILE",
+        help="write the results as JSON (SI units, world frame) to FILE (default: none)",
+    )
+    parser.add_argument(
+        "--plot",
+        metavar="DIR",
+        help="write the paper's Figs. 4-6 as PNGs into DIR, created if needed (default: none)",
+    )
+    parser.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help=f"no progress lines on stderr (default: one every {PROGRESS_EVERY_S:g} simulated s)",
+    )
+
+
+def _add_scenario(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "scenario",
+        help="make scenario files",
+        formatter_class=HelpFormatter,
+        description="Work with scenario files.",
+    )
+    sub = parser.add_subparsers(dest="scenario_command", metavar="COMMAND", required=True)
+    generate = sub.add_parser(
+        "generate",
+        help="write a random scenario for a seed",
+        formatter_class=HelpFormatter,
+        description=(
+            "Write the random scenario of SEED as TOML: 3-8 robots, a line, ring, star or\n"
+            "random graph (seed % 4), a convex or concave load (seed // 4 % 2), random mass,\n"
+            "moment, COM, contacts and pose. The same seed always gives the same scenario."
+        ),
+        epilog="example: heft scenario generate 7 -o load7.toml && heft run load7.toml",
+    )
+    generate.add_argument("seed", metavar="SEED", type=int, help="integer seed, 0 to 2**63 - 1")
+    generate.add_argument(
+        "-o", "--output", metavar="FILE", help="write to FILE (default: standard output)"
+    )
+    generate.set_defaults(handler=cmd_generate)
+
+
+def _add_bench(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "bench",
+        help="accuracy, step durations and speed of repeated runs",
+        formatter_class=HelpFormatter,
+        description=(
+            "Run SCENARIO in this process N times and print the worst final errors (mass %,\n"
+            "J %, contact-to-COM and z_ij in mm), the simulated time each paper step took,\n"
+            "how many times faster than real time the runs went (median, min, max) and the\n"
+            "peak resident memory."
+        ),
+    )
+    parser.add_argument(
+        "scenario",
+        metavar="SCENARIO",
+        nargs="?",
+        help="scenario TOML file (default: the paper's, simulator/scenarios/paper.toml)",
+    )
+    parser.add_argument(
+        "-n",
+        "--repeat",
+        metavar="N",
+        type=int,
+        help="number of runs (default: 3), in [1, 1000]",
+    )
+    parser.add_argument(
+        "--transport",
+        choices=("inprocess", "zenoh"),
+        default="inprocess",
+        help="zenoh: instead, one process per robot: lockstep speed of ring teams (--sizes),"
+        " then the paper's scenario in real time: command latency p50/p99, CPU per agent",
+    )
+    parser.add_argument(
+        "--sizes",
+        default="4,8,16",
+        metavar="N,N,...",
+        help="with --transport zenoh: ring team sizes (default: 4,8,16)",
+    )
+    parser.add_argument(
+        "--generated",
+        metavar="N",
+        type=int,
+        help="instead: run the generated scenarios of seeds 0..N-1 (N: 1 to 1000) once each"
+        " and print the median and worst errors and durations (generality)",
+    )
+    parser.set_defaults(handler=cmd_bench)
+
+
+def _add_sim(commands: argparse._SubParsersAction) -> None:
+    sim = commands.add_parser(
+        "sim",
+        help="the simulated load and robots, as a process on Zenoh",
+        formatter_class=HelpFormatter,
+        description=(
+            "Run the pymunk plant of SCENARIO as a process: it publishes each robot's\n"
+            "measurements, applies each robot's force commands and publishes the truth. It\n"
+            "starts once every robot's agent is up, and runs until the team is done or\n"
+            "SIGINT/SIGTERM/SIGHUP.\n\n"
+            "Exit status: 0 done or stopped, 1 the agents were not all up within\n"
+            "--start-timeout, 2 bad scenario or arguments, or no router within\n"
+            "--connect-timeout-ms."
+        ),
+        epilog="example: heft sim simulator/scenarios/paper.toml --team paper --clock realtime",
+    )
+    sim.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
+    sim.add_argument("--team", help="team name in the key expressions (default: scenario name)")
+    sim.add_argument(
+        "--clock",
+        choices=CLOCKS,
+        default="lockstep",
+        help="lockstep: wait for every command; realtime: the wall clock (default: lockstep)",
+    )
+    sim.add_argument(
+        "--start-timeout",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="give up if the agents are not all up after S seconds, in (0, 3600] (default: 30)",
+    )
+    add_zenoh_options(sim, connect=DEFAULT_ROUTER, listen="none")
+    sim.add_argument(
+        "--connect-timeout-ms",
+        type=int,
+        metavar="MS",
+        help="wait this long for the router at start-up, 0 to 600000 ms, then fail with exit"
+        " status 2 (default: 15000)",
+    )
+    sim.set_defaults(handler=cmd_sim)
+
+
+def _add_demo(commands: argparse._SubParsersAction) -> None:
+    demo = commands.add_parser(
+        "demo",
+        help="the paper's scenario, one process per robot on Zenoh, real time",
+        formatter_class=HelpFormatter,
+        description=(
+            "Run the paper's Sec. VI scenario as it would run on robots: a Zenoh router, the\n"
+            "plant and four agent processes on 127.0.0.1, stepping on the wall clock. Prints\n"
+            "the table of estimates against truth at the end.\n\n"
+            "Exit status: 0 converged, 1 not converged, 2 bad arguments, 130 interrupted."
+        ),
+    )
+    _add_output_options(demo)
+    demo.set_defaults(handler=cmd_demo)

@@ -1,0 +1,726 @@
+"""``heft run SCENARIO --transport zenoh``: router, plant and ``n`` agents as separate processes.
+
+The launcher starts a Zenoh router (``heft router``), the plant (``heft sim``) and one
+``heft agent`` per robot, each with its own ``robot.toml``, all on ``tcp/127.0.0.1`` with
+multicast scouting off. It prefixes every child's log lines with its name, listens to the
+agents' estimates and status and to the plant's truth (as any display would), and builds the
+same :class:`~simulator.inprocess.RunOutcome` as the in-process run.
+
+Supervision. The launcher watches every process it started, not only what the team says:
+
+- the team done → converged (``reason`` ``""``);
+- the team halted, or an agent process gone → ``robot(s) [i, ...] lost``;
+- the router or the plant process gone → ``router lost``, ``plant lost``;
+- an agent gone before the run started, or the plant giving up waiting for them →
+  ``agents did not come up``;
+- the plant at the scenario's end → ``out of simulated time (run.max_time_s = … s)``;
+- nothing heard from the plant for :data:`STALL_S` → ``stalled`` (the plant or router hangs);
+- too long on the wall clock → ``wall-clock timeout``; asked to stop → ``interrupted``.
+
+Each verdict is a short machine-readable ``reason`` and a sentence for people (``detail``).
+Then it stops the plant, tells the agents to stop, and — whatever happened, success, failure,
+a signal — stops every child it started (SIGTERM to all, then SIGKILL to what is left) and
+closes its own session. Every child also asks the kernel (Linux ``PR_SET_PDEATHSIG``) for
+:data:`DEATH_SIGNAL` when the launcher dies, so even a ``kill -9`` of the launcher leaves no
+orphan.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import logging
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TextIO
+
+from agent.config import to_toml
+from agent.faults import FaultSettings
+from agent.node import AgentNodeConfig
+from agent.process import EventQueue, RejectLog
+from agent.protocol import (
+    Control,
+    DecodeError,
+    Estimates,
+    Keys,
+    Phase,
+    PlantStatus,
+    Status,
+    Truth,
+    decode,
+    encode,
+)
+from agent.zenoh_session import SessionError, ZenohSettings, open_session
+from simulator.history import History
+from simulator.inprocess import RunOutcome, Sample
+from simulator.scenario import Scenario, scenario_to_toml
+
+Progress = Callable[[float, str], None]
+PR_SET_PDEATHSIG = 1
+INTERRUPTED = "interrupted"
+ROUTER_LOST = "router lost"
+PLANT_LOST = "plant lost"
+AGENTS_NOT_UP = "agents did not come up"
+STALLED = "stalled"
+WALL_TIMEOUT = "wall-clock timeout"
+STOP_GRACE_S = 5.0
+"""How long the processes asked to stop (SIGTERM) have to exit before SIGKILL."""
+ROUTER_GRACE_S = 1.0
+"""The router's time to exit on SIGTERM, last of all, before SIGKILL (``heft router`` waits for
+its stop in a way that a signal landing on one of Zenoh's threads does not always wake)."""
+DEATH_SIGNAL = signal.SIGKILL
+"""What every child gets from the kernel when the launcher dies (``PR_SET_PDEATHSIG``).
+
+Not SIGTERM, measured: the kernel sends the parent-death signal again each time the child is
+handed to another of the dying launcher's threads, so a child gets a burst of them; the
+processes' handler (``agent.process.stop_on_signals``: ``Event.set`` in a signal handler) is
+not re-entrant and deadlocks when one arrives while it runs (about 1 launcher kill in 25 left
+an agent or the plant behind), and ``heft router`` sometimes never wakes from its wait. The
+launcher is gone and nothing is recorded: there is nothing for a child to save."""
+HALT_GRACE_S = 0.5
+AGENT_GONE_S = 3.0
+"""An agent process that exited mid-run: how long its neighbours have to halt the team before
+the launcher names it lost itself (they notice a dead process at once, a hung one after the
+2 s lease)."""
+STALL_S = 15.0
+"""Once the plant has started: no new truth for this long means it, or the router, hangs (in
+lockstep a hung agent is dropped by the plant after its lease, so the truth goes on)."""
+TICK_SLACK = 1000
+"""How far ahead of the newest truth heard a message's tick may be: messages from different
+processes cross on the way, and a loaded machine delays some (10 s at 100 Hz)."""
+KEEP_TICKS = 500
+"""Ticks of unmatched estimates and truth the collector keeps (a robot may lag behind)."""
+LOG = logging.getLogger("heft.launcher")
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def robot_toml(
+    robot: int, scenario: Scenario, team: str, clock: str, router: str, faults: FaultSettings
+) -> str:
+    """The ``robot.toml`` of one robot of ``scenario``."""
+    config = AgentNodeConfig(
+        robot=robot,
+        n=scenario.n,
+        neighbours=scenario.neighbours(robot),
+        team=team,
+        period_s=scenario.period_s,
+        seed=scenario.run.seed,
+        clock=clock,
+        zenoh=ZenohSettings(mode="client", connect=(router,)),
+        faults=faults,
+        tuning=scenario.agent,
+    )
+    return to_toml(config, f"Agent of robot {robot} of scenario {scenario.name!r}, by heft run.")
+
+
+_prctl = None
+
+
+def _die_with_parent(death_signal: int = DEATH_SIGNAL) -> Callable[[], None] | None:
+    """A ``preexec_fn`` by which the child, before it runs, asks for ``death_signal`` when the
+    launcher dies, however it dies (Linux ``PR_SET_PDEATHSIG``), so that a killed launcher
+    leaves no orphan; None where there is no ``prctl``.
+
+    ``prctl`` is looked up here, in the launcher: between ``fork`` and ``exec`` the child only
+    calls it (no ``dlopen``, whose locks another thread may hold). A launcher that died before
+    the child's ``prctl`` is caught by comparing the parent's pid. The signal follows the
+    *thread* that started the child: start children from a thread that outlives them."""
+    global _prctl
+    if _prctl is None:
+        try:
+            _prctl = ctypes.CDLL(None, use_errno=True).prctl
+        except (OSError, AttributeError):  # not Linux
+            return None
+    prctl, parent, sig = _prctl, os.getpid(), int(death_signal)
+
+    def preexec() -> None:
+        prctl(PR_SET_PDEATHSIG, sig)
+        if os.getppid() != parent:  # the launcher is already gone
+            os._exit(1)
+
+    return preexec
+
+
+def describe_exit(code: int) -> str:
+    """A process's exit as words: ``exit status 2``, ``killed by SIGKILL``."""
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit status {code}"
+
+
+class Child:
+    """A child process whose output lines are copied to ``stream`` behind ``[name]``; it gets
+    ``death_signal`` if the launcher dies."""
+
+    def __init__(
+        self,
+        name: str,
+        args: list[str],
+        stream: TextIO,
+        env: dict[str, str],
+        death_signal: int = DEATH_SIGNAL,
+    ):
+        self.name = name
+        self.last_line = ""
+        self.process = subprocess.Popen(
+            args,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            text=True,
+            bufsize=1,
+            env=env,
+            preexec_fn=_die_with_parent(death_signal),
+        )
+        self._thread = threading.Thread(target=self._copy, args=(stream,), daemon=True)
+        self._thread.start()
+
+    def _copy(self, stream: TextIO) -> None:
+        try:
+            for line in self.process.stdout:
+                if line.strip():
+                    self.last_line = line.strip()
+                stream.write(f"[{self.name}] {line}")
+                stream.flush()
+        except (OSError, ValueError):  # the launcher's stream is closed: the lines are lost
+            pass
+
+    def last_words(self) -> str:
+        """The last line an exited process wrote (e.g. its ``heft: error: ...``), or ``""``."""
+        self._thread.join(timeout=1.0)  # the rest of its output, up to the end of the pipe
+        return self.last_line.removeprefix("heft: error: ")
+
+    def ended(self, code: int) -> str:
+        """``exit status 2: <its last line>``, for a verdict."""
+        said = self.last_words()
+        return f"{describe_exit(code)}: {said}" if said else describe_exit(code)
+
+    def cpu_seconds(self) -> float | None:
+        """User + system CPU time the process has used so far (Linux ``/proc``)."""
+        try:
+            fields = Path(f"/proc/{self.process.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            return None
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    def terminate(self) -> None:
+        """SIGTERM (after SIGCONT: a stopped process cannot exit), if it still runs."""
+        if self.process.poll() is None:
+            try:
+                self.process.send_signal(signal.SIGCONT)
+                self.process.send_signal(signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+
+    def stop(self, grace_s: float = STOP_GRACE_S) -> None:
+        """SIGTERM, up to ``grace_s`` to exit, then SIGKILL."""
+        stop_all([self], grace_s)
+
+
+def wait_all(children: Sequence[Child], timeout_s: float) -> bool:
+    """Wait up to ``timeout_s`` for every one of ``children`` to exit; True if they did."""
+    deadline = time.monotonic() + timeout_s
+    for child in children:
+        try:
+            child.process.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            return False
+    return True
+
+
+def stop_all(children: Sequence[Child], grace_s: float = STOP_GRACE_S) -> None:
+    """Stop ``children`` together: SIGTERM to every one still running, up to ``grace_s`` for
+    all of them to exit, then SIGKILL to the rest (a hung process cannot hold the run up)."""
+    for child in children:
+        child.terminate()
+    if not wait_all(children, grace_s):
+        for child in children:
+            if child.process.poll() is None:
+                LOG.warning("%s did not stop within %.0f s: killed", child.name, grace_s)
+                child.process.kill()
+        wait_all(children, grace_s)
+    for child in children:
+        child._thread.join(timeout=1.0)
+
+
+class Collector:
+    """What the launcher hears, as any display would: every robot's estimates and status, the
+    plant's truth and counters.
+
+    The final instant is decided by the team's state, not by message timing: it is the first
+    instant at which every robot is done, ``max_i phase_since_i`` over the robots' ``done``
+    estimates — the instant the in-process run ends at."""
+
+    def __init__(self, session, keys: Keys, n: int, record_every: int):
+        self.n = n
+        self.record_every = record_every
+        self.events = EventQueue()
+        self.rejects = RejectLog(LOG, "launcher")
+        self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
+        self.truths: dict[int, Truth] = {}
+        self.history: History[Sample] = History()
+        self.phase_ticks: dict[str, int] = {}
+        self.done_since: dict[int, int] = {}
+        self.statuses: dict[int, Status] = {}
+        """Each robot's latest status."""
+        self.halted = False
+        self.lost: set[int] = set()
+        self.plant_status: PlantStatus | None = None
+        self.latest: Sample | None = None
+        """The newest complete sample before the team was done."""
+        self.final: Sample | None = None
+        """The sample at the final instant, once heard."""
+        self.latest_tick = 0
+        self._finished = False
+        self.first_truth_at: float | None = None
+        self.halted_at = 0.0
+        self.finished_at: float | None = None
+        self._subscribers = [
+            self._subscribe(session, keys.all_estimates(), Estimates),
+            self._subscribe(session, keys.all_statuses(), Status),
+            self._subscribe(session, keys.truth(), Truth),
+            self._subscribe(session, keys.plant_status(), PlantStatus),
+        ]
+
+    def _subscribe(self, session, key: str, kind: type):
+        put = self.events.put
+        return session.declare_subscriber(key, lambda s: put((kind, s.payload.to_bytes())))
+
+    def drain(self, timeout: float) -> None:
+        self.events.drain(lambda event: self._handle(*event), timeout)
+
+    def _handle(self, kind: type, payload: bytes) -> None:
+        if self._finished and kind is not PlantStatus:
+            return  # the verdict is in: what the team says while it shuts down changes nothing
+        try:
+            message = decode(kind, payload)
+        except DecodeError as err:
+            self.rejects(kind.__name__, err)
+            return
+        robot = getattr(message, "robot", 1)
+        if not 1 <= robot <= self.n:
+            self.rejects(kind.__name__, f"robot {robot} of a team of {self.n}", "not in the team")
+            return
+        # No robot's instant and no truth is ever far ahead of the newest truth (the plant
+        # starts at tick 0).
+        tick = getattr(message, "tick", 0)
+        if not isinstance(message, PlantStatus) and tick > self.latest_tick + TICK_SLACK:
+            why = "tick out of window"
+            self.rejects(kind.__name__, f"tick {tick} at tick {self.latest_tick}", why)
+            return
+        if isinstance(message, Estimates):
+            self._estimate(message)
+        elif isinstance(message, Status):
+            self._status(message)
+        elif isinstance(message, Truth):
+            if self.first_truth_at is None:
+                self.first_truth_at = time.perf_counter()
+            self.latest_tick = max(self.latest_tick, message.tick)
+            self.truths[message.tick] = message
+            self._complete(message.tick)
+        else:
+            self.plant_status = message
+            if not self._finished:
+                self.lost.update(message.lost)
+
+    def _estimate(self, est: Estimates) -> None:
+        if est.phase == Phase.HALTED:
+            self._halt()
+        if est.phase == Phase.DONE:
+            self.done_since[est.robot] = est.phase_since
+        self.estimates[est.tick][est.robot] = est
+        self._complete(est.tick)
+
+    def _status(self, status: Status) -> None:
+        self.statuses[status.robot] = status
+        self.lost.update(status.lost_neighbours)
+        tick = self.phase_ticks.get(status.phase.label)
+        if tick is None or status.tick < tick:
+            self.phase_ticks[status.phase.label] = status.tick
+        if status.phase == Phase.HALTED:
+            self._halt()
+
+    def _halt(self) -> None:
+        if not self.halted:
+            self.halted = True
+            self.halted_at = time.perf_counter()
+
+    @property
+    def done_instant(self) -> int | None:
+        """The first instant at which every robot was done (the final instant)."""
+        if len(self.done_since) < self.n:
+            return None
+        return max(self.done_since.values())
+
+    def _complete(self, instant: int) -> None:
+        robots = self.estimates.get(instant)
+        truth = self.truths.get(instant)
+        if robots is None or truth is None or len(robots) < self.n:
+            return
+        sample = Sample(time_s=truth.time_s, truth=truth, estimates=dict(robots))
+        del self.estimates[instant]
+        del self.truths[instant]
+        done = self.done_instant
+        if instant % self.record_every == 0 or instant == done:
+            self.history.append(sample)
+        if done is None or instant < done:
+            if self.latest is None or instant > self.latest.truth.tick:
+                self.latest = sample
+        elif self.final is None or instant < self.final.truth.tick:
+            self.final = sample
+        for old in [t for t in self.truths if t < instant - KEEP_TICKS]:
+            del self.truths[old]
+        for old in [t for t in self.estimates if t < instant - KEEP_TICKS]:
+            del self.estimates[old]
+
+    def conclude(self) -> None:
+        """The run is over, whatever the team says next."""
+        self.finished()
+        self._finished = True
+
+    def finished(self) -> bool:
+        # After a halt, a moment more to hear who was lost (agents and plant report it).
+        halt_over = self.halted and time.perf_counter() - self.halted_at > HALT_GRACE_S
+        self._finished = self._finished or halt_over or self.final is not None
+        if self._finished and self.finished_at is None:
+            self.finished_at = time.perf_counter()
+        return self._finished
+
+    def rejections(self) -> dict:
+        """Messages rejected: by the launcher (by kind), the plant, and each robot's agent
+        (as its latest status reported them)."""
+        plant = self.plant_status.decode_errors if self.plant_status else None
+        return {
+            "launcher": dict(self.rejects.counts),
+            "plant": plant,
+            "robots": {
+                str(s.robot): {"decode_errors": s.decode_errors, "rejected": s.rejected}
+                for s in sorted(self.statuses.values(), key=lambda s: s.robot)
+            },
+        }
+
+    def close(self) -> None:
+        for sub in self._subscribers:
+            sub.undeclare()
+
+
+def _child_env() -> dict[str, str]:
+    env = dict(os.environ)
+    root = str(Path(__file__).resolve().parents[1])
+    env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _team_name(scenario: Scenario) -> str:
+    return re.sub(r"[^A-Za-z0-9_-]", "-", scenario.name)[:40] + f"-{os.getpid()}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Verdict:
+    """Why a run ended: ``reason`` is short and machine-readable (``""``: converged), ``detail``
+    a sentence for people."""
+
+    reason: str = ""
+    detail: str = ""
+
+
+class RunFailed(Exception):
+    """A run that ended before any instant was recorded; ``reason`` and ``detail`` say why."""
+
+    def __init__(self, reason: str, transport: dict, detail: str = ""):
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+        self.detail = detail
+        self.transport = transport
+
+
+def run_zenoh(
+    scenario: Scenario,
+    *,
+    clock: str = "lockstep",
+    faults: FaultSettings | None = None,
+    record_every: int = 5,
+    progress: Progress | None = None,
+    progress_every_s: float = 5.0,
+    log_stream: TextIO | None = None,
+    wall_timeout_s: float | None = None,
+    stop: threading.Event | None = None,
+) -> RunOutcome:
+    """Run ``scenario`` with one process per robot over Zenoh (see the module docstring).
+
+    The run ends early, with the verdict ``interrupted``, once ``stop`` is set (``heft run``
+    sets it on SIGINT, SIGTERM and SIGHUP) or on ``KeyboardInterrupt``; the processes are
+    stopped and what was recorded is returned all the same. :class:`RunFailed` when nothing
+    could be recorded."""
+    faults = faults or FaultSettings()
+    stop = stop or threading.Event()
+    stream = log_stream or sys.stderr
+    router = f"tcp/127.0.0.1:{free_port()}"
+    team = _team_name(scenario)
+    keys = Keys(team)
+    env = _child_env()
+    children: list[Child] = []
+
+    def start(name: str, args: list[str]) -> Child:
+        child = Child(name, [sys.executable, "-m", "agent", *args], stream, env)
+        children.append(child)
+        return child
+
+    started = time.perf_counter()
+    if wall_timeout_s is None:
+        wall_timeout_s = 60.0 + 20.0 * scenario.run.max_time_s
+    cpu: dict[str, float | None] = {}
+    verdict = Verdict(INTERRUPTED, "asked to stop")
+    collector: Collector | None = None
+    with tempfile.TemporaryDirectory(prefix="heft-run-") as tmp:
+        folder = Path(tmp)
+        scenario_file = folder / "scenario.toml"
+        scenario_file.write_text(scenario_to_toml(scenario), encoding="utf-8")
+        try:
+            router_child = start("router", ["router", "--listen", router])
+            with _launcher_session(router, router_child) as session:
+                collector = Collector(session, keys, scenario.n, record_every)
+                plant: Child | None = None
+                agents: list[Child] = []
+                try:
+                    try:
+                        if not stop.is_set():
+                            plant = start(
+                                "plant",
+                                ["sim", str(scenario_file), "--team", team, "--clock", clock]
+                                + ["--connect", router],
+                            )
+                        for i in range(1, scenario.n + 1):
+                            if stop.is_set():
+                                break
+                            config = folder / f"robot-{i}.toml"
+                            text = robot_toml(i, scenario, team, clock, router, faults)
+                            config.write_text(text, encoding="utf-8")
+                            agents.append(start(f"robot {i}", ["agent", "--config", str(config)]))
+                        if plant is not None and len(agents) == scenario.n:
+                            watch = _Watch(collector, router_child, plant, agents, scenario)
+                            verdict = watch.run(
+                                stop, progress, progress_every_s, started + wall_timeout_s
+                            )
+                    except KeyboardInterrupt:  # Ctrl-C when run_zenoh is called as a function
+                        verdict = Verdict(INTERRUPTED, "asked to stop")
+                    collector.conclude()  # agents leaving from now on are not lost robots
+                    cpu.update({child.name: child.cpu_seconds() for child in children})
+                    _shut_down(session, keys, collector, router_child, plant, agents)
+                finally:
+                    collector.close()
+        finally:
+            stop_all(children[:0:-1])  # whatever is left of the plant and the agents
+            stop_all(children[:1], ROUTER_GRACE_S)
+    transport = _transport_report(collector, cpu)
+    final = collector.final or collector.latest
+    if final is None:
+        nothing = "no instant of every robot's estimates with the truth was recorded"
+        raise RunFailed(verdict.reason or "nothing recorded", transport, verdict.detail or nothing)
+    return RunOutcome(
+        scenario=scenario,
+        converged=not verdict.reason,
+        ticks=final.truth.tick,
+        wall_s=time.perf_counter() - started,
+        final=final,
+        history=sorted(collector.history, key=lambda sample: sample.truth.tick),
+        phase_ticks=dict(sorted(collector.phase_ticks.items(), key=lambda kv: kv[1])),
+        transport=transport,
+        reason=verdict.reason,
+        detail=verdict.detail,
+    )
+
+
+def _launcher_session(router: str, router_child: Child):
+    """The launcher's own session, through its router; :class:`RunFailed` if the router
+    died before it could be reached (e.g. its port was taken in the meantime)."""
+    try:
+        return open_session(ZenohSettings(mode="client", connect=(router,)))
+    except SessionError:
+        code = router_child.process.poll()
+        if code is None:
+            raise
+        ended = router_child.ended(code)
+        detail = f"the Zenoh router process ended before it was reached ({ended})"
+        raise RunFailed(ROUTER_LOST, {}, detail) from None
+
+
+def _shut_down(
+    session, keys: Keys, collector: Collector, router: Child, plant: Child | None, agents
+) -> None:
+    """Stop the plant, then the agents; the router stays up until the caller stops it."""
+    if plant is not None:  # the plant first, so that it never sees the agents leave as lost
+        stop_all([plant])
+    if router.process.poll() is None:  # without a router, nobody hears the stop message
+        session.put(keys.control(), encode(Control("stop")))
+        wait_all(agents, 1.0)  # they leave cleanly on the message; SIGTERM for the others
+    stop_all(agents)
+    collector.drain(0.2)
+
+
+def _transport_report(collector: Collector | None, cpu: dict[str, float | None]) -> dict:
+    if collector is None:
+        return {"cpu_s": cpu}
+    return {
+        "plant": dataclasses.asdict(collector.plant_status) if collector.plant_status else None,
+        "lost": sorted(collector.lost),
+        "halted": collector.halted,
+        "decode_errors": collector.rejects.total,
+        "rejections": collector.rejections(),
+        "cpu_s": cpu,
+        "stepping_wall_s": (
+            collector.finished_at - collector.first_truth_at
+            if collector.finished_at and collector.first_truth_at
+            else None
+        ),
+    }
+
+
+class _Watch:
+    """The launcher's watch over a run: what the team says (through the collector) and what
+    its processes do (see the module docstring for the verdicts)."""
+
+    def __init__(
+        self,
+        collector: Collector,
+        router: Child,
+        plant: Child,
+        agents: list[Child],
+        scenario: Scenario,
+    ):
+        self.collector = collector
+        self.router = router
+        self.plant = plant
+        self.agents = agents
+        self.scenario = scenario
+        self.gone: dict[int, tuple[float, int]] = {}
+        """Robots whose agent process exited mid-run: when, and its exit code."""
+        self.tick_seen = -1
+        self.tick_seen_at = time.perf_counter()
+
+    def _t(self) -> str:
+        return f"t = {self.collector.latest_tick * self.scenario.period_s:.2f} s simulated"
+
+    def run(
+        self,
+        stop: threading.Event,
+        progress: Progress | None,
+        every_s: float,
+        deadline: float,
+    ) -> Verdict:
+        """Watch until the run is over; the verdict."""
+        collector = self.collector
+        next_report = every_s
+        while not collector.finished():
+            if stop.is_set():
+                return Verdict(INTERRUPTED, "asked to stop")
+            collector.drain(0.05)
+            t = collector.latest_tick * self.scenario.period_s
+            if progress is not None and t >= next_report:
+                progress(t, ", ".join(sorted(collector.phase_ticks, key=collector.phase_ticks.get)))
+                next_report += every_s
+            verdict = self._processes() or self._stalled()
+            if verdict is not None:
+                return verdict
+            if time.perf_counter() > deadline:
+                detail = f"the run took too long on the wall clock ({self._t()})"
+                return Verdict(WALL_TIMEOUT, detail)
+        return self._team()
+
+    def _team(self) -> Verdict:
+        """The verdict once the collector says the run is over."""
+        collector = self.collector
+        if collector.halted or self.gone:
+            lost = sorted(set(collector.lost) | set(self.gone))
+            ended: dict[str, list[int]] = defaultdict(list)
+            for i, (_, code) in sorted(self.gone.items()):
+                ended[describe_exit(code)].append(i)
+            exits = "; ".join(
+                f"the agent process of robot(s) {robots} ended ({how})"
+                for how, robots in ended.items()
+            )
+            why = "the team halted" if collector.halted else "no neighbour was left to halt it"
+            detail = (
+                f"{exits + '; ' if exits else ''}{why} at {self._t()}"
+                " (n is fixed: estimates without a robot would be wrong)"
+            )
+            return Verdict(f"robot(s) {lost} lost" if lost else "team halted", detail)
+        return Verdict()
+
+    def _processes(self) -> Verdict | None:
+        """A verdict when the router, the plant or an agent process is gone."""
+        collector = self.collector
+        code = self.router.process.poll()
+        if code is not None:
+            how = describe_exit(code)
+            return Verdict(ROUTER_LOST, f"the Zenoh router process ended ({how}) at {self._t()}")
+        code = self.plant.process.poll()
+        if code is not None:
+            collector.drain(0.5)  # what it said last (its status), and the team's last words
+            if collector.finished():
+                return self._team()
+            return self._plant_exit(code)
+        now = time.perf_counter()
+        for i, child in enumerate(self.agents, start=1):
+            code = child.process.poll()
+            if code is None or i in self.gone:
+                continue
+            if collector.first_truth_at is None:
+                return Verdict(
+                    AGENTS_NOT_UP,
+                    f"robot {i}'s agent process ended before the run started ({child.ended(code)})",
+                )
+            self.gone[i] = (now, code)  # its neighbours should halt the team: give them time
+        if self.gone and now - min(t for t, _ in self.gone.values()) > AGENT_GONE_S:
+            return self._team()
+        return None
+
+    def _plant_exit(self, code: int) -> Verdict:
+        collector = self.collector
+        max_time = self.scenario.run.max_time_s
+        how = describe_exit(code)
+        if collector.first_truth_at is None:
+            if code == 1:  # the plant's --start-timeout: see heft sim
+                return Verdict(AGENTS_NOT_UP, "the plant gave up waiting for the agents")
+            ended = self.plant.ended(code)
+            return Verdict(PLANT_LOST, f"the plant process ended before it started ({ended})")
+        status = collector.plant_status
+        tick = max(collector.latest_tick, status.tick if status else 0)
+        if code == 0 and tick >= round(max_time / self.scenario.period_s):
+            return Verdict(
+                f"out of simulated time (run.max_time_s = {max_time:g} s)",
+                f"the team was not done after the scenario's {max_time:g} s",
+            )
+        return Verdict(PLANT_LOST, f"the plant process ended ({how}) at {self._t()}")
+
+    def _stalled(self) -> Verdict | None:
+        now = time.perf_counter()
+        if self.collector.latest_tick != self.tick_seen:
+            self.tick_seen, self.tick_seen_at = self.collector.latest_tick, now
+        elif self.collector.first_truth_at is not None and now - self.tick_seen_at > STALL_S:
+            return Verdict(
+                STALLED,
+                f"no new truth from the plant for {STALL_S:g} s after {self._t()}: the plant,"
+                " the router or an agent the plant waits for hangs",
+            )
+        return None

@@ -1,0 +1,401 @@
+"""The agent's parts on scripted input: no plant, every message and sample built by hand.
+
+- :class:`~agent.inbox.Inbox`: which instants can be estimated, early, late and bad messages;
+- :class:`~agent.phase_machine.PhaseMachine`: the switch tick the team agrees on, a halt
+  spreading through messages, and the force laws (kick, spin-up, inertia torque with its
+  reversals, push), on scripted estimates of its own robot;
+- :class:`~agent.agent.Agent`: the parts composed, on a rigid body's exact contact velocities.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pytest
+
+from agent.agent import Agent
+from agent.config import AgentConfig, AgentTuning
+from agent.estimation.excitation import kick_force, spin_up_force
+from agent.estimation.geometry import Vec2, cross, rotate
+from agent.estimation.settling import SettleDetectors
+from agent.inbox import HISTORY_TICKS, Inbox
+from agent.phase_machine import PhaseMachine
+from agent.protocol import Measurement, Phase, Share
+
+DT = 0.01
+TUNING = AgentTuning(kick_duration_s=0.05, switch_margin_ticks=2)
+
+
+def measurement(robot: int, tick: int, velocity: Vec2 = (0.0, 0.0)) -> Measurement:
+    return Measurement(robot, tick, tick * DT, velocity, (0.0, 0.0))
+
+
+def share(sender: int, tick: int, velocity: Vec2 = (0.0, 0.0), **fields) -> Share:
+    return Share(sender=sender, tick=tick, velocity=velocity, degree=1, **fields)
+
+
+# --------------------------------------------------------------------------------------------
+# inbox
+# --------------------------------------------------------------------------------------------
+
+
+def test_inbox_estimation_instant_waits_for_every_neighbour():
+    inbox = Inbox((2, 3))
+    assert inbox.receive(measurement(1, 0), []) == -1  # nobody heard yet
+    assert inbox.receive(measurement(1, 1), [share(2, 0), share(3, 0)]) == 0
+    # Robot 3's message of tick 1 is late: the instant stays at 0.
+    assert inbox.receive(measurement(1, 2), [share(2, 1, (0.5, 0.0))]) == 0
+    # It arrives with the next one: the instant jumps to k − 1, 1 and 2 to be caught up.
+    late = [share(3, 2, (0.0, 3.0)), share(3, 1, (0.0, 2.0)), share(2, 2)]
+    assert inbox.receive(measurement(1, 3, (1.0, 1.0)), late) == 2
+    assert inbox.neighbour_velocity[3] == {0: (0.0, 0.0), 1: (0.0, 2.0), 2: (0.0, 3.0)}
+    assert inbox.neighbour_velocity[2][1] == (0.5, 0.0)
+    assert inbox.own_velocity[3] == (1.0, 1.0)
+    assert inbox.latest[3].tick == 2  # the older one arrived after it: not "latest"
+    assert inbox.rejected == 0
+
+
+def test_inbox_early_messages_wait_and_bad_ones_are_rejected():
+    inbox = Inbox((2,))
+    early = share(2, 5, (1.0, 0.0))  # stamped at the current tick: from a faster clock
+    far = share(2, 5 + HISTORY_TICKS)
+    bad = [
+        share(2, 4, (math.nan, 0.0)),
+        share(2, 4, centroid=(math.inf, 0.0)),
+        share(2, 4, spread=math.nan),
+        share(3, 4),  # not a neighbour
+        far,
+    ]
+    assert inbox.receive(measurement(1, 5), [early, *bad]) == -1
+    assert inbox.rejected == len(bad)
+    assert 5 not in inbox.neighbour_velocity[2] and not inbox.latest
+    assert inbox.receive(measurement(1, 6), []) == 5  # used from the tick after its own
+    assert inbox.neighbour_velocity[2][5] == (1.0, 0.0)
+    assert inbox.latest[2] is early and inbox.rejected == len(bad)
+
+
+def test_inbox_forgets_old_ticks():
+    inbox = Inbox((2,))
+    for k in range(3):
+        inbox.receive(measurement(1, k), [share(2, k - 1)] if k else [])
+    inbox.forget(0)
+    assert sorted(inbox.own_velocity) == [1, 2] and sorted(inbox.neighbour_velocity[2]) == [1]
+
+
+# --------------------------------------------------------------------------------------------
+# phase machine
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Flag:
+    settled: bool = False
+
+
+def flags() -> SettleDetectors:
+    return SettleDetectors(*(Flag() for _ in range(6)))
+
+
+@dataclass
+class Own:
+    """Scripted estimates of the machine's own robot (what it reads of them)."""
+
+    instant: int = -1
+    omega: float | None = None
+    measured: int | None = None
+    zdot: dict[int, Vec2] = field(default_factory=dict)
+    settle: SettleDetectors = field(default_factory=flags)
+    centroid: Vec2 = (0.0, 0.0)
+    spread: float = 0.0
+    moment: float | None = None
+
+
+def machine(robot: int = 1, n: int = 3, seed: int = 1, **tuning) -> PhaseMachine:
+    neighbours = tuple(j for j in (robot - 1, robot + 1) if 1 <= j <= n)
+    return PhaseMachine(AgentConfig(robot, n, neighbours, DT, seed, replace(TUNING, **tuning)))
+
+
+def state(sender: int, tick: int, m: PhaseMachine) -> Share:
+    """The barrier's part of ``sender``'s message after its step at ``tick``."""
+    b = m.barrier
+    return share(sender, tick, phase=b.phase, ready=b.ready, switch_at=b.switch_at)
+
+
+def run_team(machines, owns, ticks, start=0, events=None):
+    """Steps a path of machines: at tick ``k`` each hears its neighbours' states of ``k − 1``.
+    ``events[k](machines, owns)`` runs before tick ``k``. Returns each robot's forces."""
+    n = len(machines)
+    sent: dict[int, Share] = {}
+    forces = {i: {} for i in machines}
+    for k in range(start, start + ticks):
+        if events and k in events:
+            events[k](machines, owns)
+        for i, m in machines.items():
+            heard = [sent[j] for j in (i - 1, i + 1) if 1 <= j <= n and j in sent]
+            m.step(k, owns[i], heard)
+            forces[i][k] = m.force(k, owns[i])
+        sent = {i: state(i, k, m) for i, m in machines.items()}
+    return forces
+
+
+def make_ready(*robots):
+    def event(machines, owns):
+        for i in robots:
+            s = owns[i].settle
+            s.distances.settled = s.centroid.settled = s.spread.settled = True
+
+    return event
+
+
+def test_every_robot_switches_at_the_same_agreed_tick():
+    n = 3
+    machines = {i: machine(i, n) for i in range(1, n + 1)}
+    owns = {i: Own(spread=0.5, omega=0.4, centroid=(0.3 * i, -0.2)) for i in machines}
+    ready = {1: 8, 2: 20, 3: 14}
+    events = {tick: make_ready(i) for i, tick in ready.items()}
+    forces = run_team(machines, owns, 60, events=events)
+    switch = {m.since for m in machines.values()}
+    assert len(switch) == 1 and all(m.phase is Phase.INERTIA for m in machines.values())
+    (k,) = switch
+    margin = TUNING.switch_margin_ticks
+    assert 20 + n + margin <= k <= 20 + 2 * n + margin
+    for i, m in machines.items():
+        assert m.phase_at(k - 1) is Phase.EXCITE and m.phase_at(k) is Phase.INERTIA
+        assert forces[i][k - 1] == (0.0, 0.0)  # spin-up with nothing turning
+        assert math.hypot(*forces[i][k]) > 0.1  # eq. (14) from the switch tick on
+
+
+def test_no_robot_is_ready_during_the_kick():
+    m = machine()
+    own = Own(spread=0.5)
+    own.settle.distances.settled = own.settle.centroid.settled = True
+    own.settle.spread.settled = True
+    assert [m.ready(k, own) for k in range(7)] == [False] * 5 + [True, True]
+    own.spread = 0.0  # w = 0: eq. (14) would divide by zero
+    assert not m.ready(6, own)
+
+
+def test_a_halt_reaches_the_team_through_its_messages():
+    n = 3
+    machines = {i: machine(i, n) for i in range(1, n + 1)}
+    owns = {i: Own(spread=0.5, omega=0.4, centroid=(0.3, -0.2)) for i in machines}
+
+    def halt(machines, owns):
+        machines[1].halt(31)
+
+    forces = run_team(machines, owns, 60, events={31: halt, 8: make_ready(1, 2, 3)})
+    assert [m.since for m in machines.values()] == [31, 32, 33]
+    for i, m in machines.items():
+        assert m.phase is Phase.HALTED
+        assert m.phase_at(m.since - 1) is not Phase.HALTED
+        assert all(f == (0.0, 0.0) for k, f in forces[i].items() if k >= m.since)
+        assert any(f != (0.0, 0.0) for k, f in forces[i].items() if k < m.since)
+
+
+def test_the_kick_is_seeded_of_its_magnitude_and_only_during_kick_duration():
+    m = machine(robot=2, seed=7, kick_force=1.5)
+    own = Own(zdot={1: (0.0, 0.0), 3: (0.0, 0.0)})
+    forces = [m.force(k, own) for k in range(8)]
+    kick = kick_force(7, 2, 1.5)
+    assert forces[:5] == [kick] * 5 and math.hypot(*kick) == pytest.approx(1.5)
+    assert forces[5:] == [(0.0, 0.0)] * 3  # the spin-up, with nothing turning
+    assert machine(robot=2, seed=7, kick_force=1.5).kick == kick
+    assert machine(robot=2, seed=8, kick_force=1.5).kick != kick
+    assert machine(robot=3, seed=7, kick_force=1.5).kick != kick
+    # After the kick, the geometry-free spin-up on the relative velocities.
+    own.zdot = {1: (0.1, -0.2), 3: (-0.3, 0.05)}
+    expected = spin_up_force(TUNING.spin_gain, TUNING.spin_speed, own.zdot.values())
+    assert m.force(5, own) == expected != (0.0, 0.0)
+
+
+def enter(m: PhaseMachine, phase: Phase, k: int, own: Own) -> None:
+    """A neighbour's message says the team is in ``phase``: catch up at tick ``k``."""
+    assert m.step(k, own, [share(2, k - 1, phase=phase)]) is True
+    assert m.phase is phase and m.since == k
+
+
+@pytest.mark.parametrize("spin", [1.0, -1.0])
+def test_inertia_torque_reverses_at_the_limit_and_at_half_of_it(spin):
+    limit = 1.0
+    m = machine(inertia_max_omega=limit, inertia_force=2.0)
+    own = Own(spread=0.5, omega=0.3 * spin, centroid=(0.6, -0.8))
+    enter(m, Phase.INERTIA, 10, own)
+    w = 3 * 0.5
+    gain = 2.0 / math.sqrt(w)
+    assert m.inertia_gain == pytest.approx(gain) and m.spin_sign == spin
+    script = [0.3, 0.99, 1.0, 0.7, 0.51, 0.5, 0.8, 1.2, 0.2]
+    expected = [1, 1, -1, -1, -1, 1, 1, -1, 1]  # +1: speed the turn up, −1: brake it
+    for k, (speed, direction) in enumerate(zip(script, expected), start=10):
+        own.omega, own.instant = spin * speed, k - 1
+        f = m.force(k, own)
+        lead = own.omega * (k + 0.5 - own.instant) * DT
+        z = rotate(own.centroid, lead)
+        # f = ±k z_i⊥: torque ±k ‖z_i‖² about p_G, signed to speed up (or brake) the turn.
+        assert cross(z, f) == pytest.approx(direction * spin * gain, rel=1e-12), k
+        assert m.mean_torque(k, k + 1) == pytest.approx(direction * spin * gain * w), k
+
+
+def test_inertia_torque_reverses_on_the_predicted_omega():
+    """ω last measured at tick 10; the prediction adds the team's torque since, over ``Ĵ``."""
+    moment = 2.0
+    m = machine(inertia_max_omega=1.0, inertia_force=2.0)
+    own = Own(spread=0.5, omega=0.9, centroid=(1.0, 0.0), measured=10, instant=10)
+    enter(m, Phase.INERTIA, 11, own)
+    own.moment = moment
+    torque = 2.0 * math.sqrt(1.5)  # k w, applied from tick 11 on
+    braking_from = None
+    for k in range(11, 40):
+        m.force(k, own)
+        assert m.omega_at(k + 1, own) == pytest.approx(
+            0.9 + DT / moment * sum(m.mean_torque(t, t + 1) for t in range(10, k + 1))
+        )
+        if braking_from is None and m.direction < 0:
+            braking_from = k
+    # Measured ω stays 0.9 (no new measurement): only the prediction can reach the limit.
+    steps = math.ceil((1.0 - 0.9) / (torque * DT / moment))  # ticks of torque to reach 1.0
+    assert braking_from == 11 + steps
+
+
+@pytest.mark.parametrize(
+    "moment, magnitude",
+    [(6.0, 2.0), (1.5, 1.0), (60.0, 10.0)],  # f̄_y J/n; push_min_force; max_force
+)
+def test_push_force(moment, magnitude):
+    m = machine(push_fbar=1.0, push_min_force=1.0, max_force=10.0, push_direction=(3.0, 4.0))
+    own = Own(moment=moment, omega=0.2)
+    enter(m, Phase.PUSH, 50, own)
+    expected = (magnitude * 0.6, magnitude * 0.8)
+    assert m.moment_used == moment
+    for k in range(50, 55):
+        own.omega, own.moment = -1.0, 99.0  # later estimates do not change it
+        assert m.force(k, own) == pytest.approx(expected, rel=1e-12)
+    assert math.hypot(*m.force(60, own)) <= 10.0
+
+
+def test_done_and_halted_apply_no_force():
+    m = machine()
+    enter(m, Phase.DONE, 5, Own())
+    assert m.force(5, Own(zdot={2: (1.0, 0.0)})) == (0.0, 0.0)
+    m.halt(9)
+    assert m.phase is Phase.HALTED and m.since == 9 and m.force(9, Own()) == (0.0, 0.0)
+    m.halt(12)  # told again: still halted since 9
+    assert m.since == 9
+
+
+# --------------------------------------------------------------------------------------------
+# the agent, composed
+# --------------------------------------------------------------------------------------------
+
+
+def agents(n: int, seed: int = 3) -> dict[int, Agent]:
+    return {
+        i: Agent(
+            AgentConfig(
+                robot=i,
+                n=n,
+                neighbours=tuple(j for j in (i - 1, i + 1) if 1 <= j <= n),
+                period_s=DT,
+                seed=seed,
+                tuning=TUNING,
+            )
+        )
+        for i in range(1, n + 1)
+    }
+
+
+def run_agents(team, ticks, velocity=lambda i, t: (0.0, 0.0), before=None):
+    """Each agent steps on its sample and its neighbours' messages of the previous tick."""
+    sent: dict[int, Share] = {}
+    commands = {i: [] for i in team}
+    for k in range(ticks):
+        if before and k in before:
+            before[k](team)
+        shares = {}
+        for i, a in team.items():
+            heard = [sent[j] for j in a.neighbours if j in sent]
+            command, shares[i] = a.step(measurement(i, k, velocity(i, k * DT)), heard)
+            commands[i].append(command.force)
+        sent = shares
+    return commands
+
+
+def test_agent_kick_then_halt_through_messages():
+    team = agents(2, seed=11)
+    commands = run_agents(team, 10, before={4: lambda team: team[1].halt()})
+    for i, a in team.items():
+        assert commands[i][:4] == [kick_force(11, i, TUNING.kick_force)] * 4
+        est = a.estimates()
+        assert a.phase is Phase.HALTED and est.phase is Phase.HALTED
+        assert est.phase_since == 3 + i  # robot 2 hears of it one tick later
+        assert commands[i][3 + i :] == [(0.0, 0.0)] * (7 - i)
+
+
+def test_agent_estimates_a_turning_body_from_its_exact_velocities():
+    """Three contacts of a rigid body turning at ω about its moving COM: Steps 1-3 and the
+    consensus settle, and the team agrees to leave the excite phase (no force reaches the
+    body: its motion is scripted)."""
+    omega, v = 0.8, np.array([0.1, -0.05])
+    r = {1: np.array([1.0, 0.4]), 2: np.array([-0.5, 1.1]), 3: np.array([0.2, -1.3])}
+
+    def rot(a):
+        return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+
+    def velocity(i, t):
+        u = rot(omega * t) @ r[i]
+        return (float(v[0] - omega * u[1]), float(v[1] + omega * u[0]))
+
+    team = agents(3)
+    run_agents(team, 301, velocity)
+    t = 299 * DT  # the estimation instant of tick 300
+    centroid = np.mean([r[i] for i in r], axis=0)
+    for i, a in team.items():
+        est = a.estimates()
+        assert a.instant == est.tick == 299
+        assert est.phase is Phase.INERTIA and est.phase_since == team[1].estimates().phase_since
+        assert sorted(est.settled) == [1, 2, 3] and max(est.settled.values()) < est.phase_since
+        assert est.omega == pytest.approx(omega, abs=1e-9)
+        for j, z in est.relative_positions.items():
+            assert np.linalg.norm(np.array(z) - rot(omega * t) @ (r[i] - r[j])) < 1e-9
+        assert sorted(est.relative_positions) == list(a.neighbours)
+        z_i = rot(omega * t) @ (r[i] - centroid)
+        assert np.linalg.norm(np.array(est.centroid_offset) - z_i) < 1e-6
+        w = sum(float(np.sum((r[j] - centroid) ** 2)) for j in r)
+        assert est.spread == pytest.approx(w, rel=1e-6)
+
+
+# --------------------------------------------------------------------------------------------
+# what a neighbour's message cannot do
+# --------------------------------------------------------------------------------------------
+
+
+def test_ready_bits_of_robots_outside_the_team_are_ignored():
+    m = machine(robot=2, n=3)
+    forged = share(1, 0, phase=Phase.EXCITE, ready=2**64 - 1)  # every bit, not only 1..3
+    m.step(1, Own(), [forged])
+    assert m.barrier.ready == 0b111  # the three robots: the team can still agree
+    assert m.barrier.switch_at == 1 + 3 + TUNING.switch_margin_ticks
+
+
+def test_a_switch_tick_no_robot_could_have_proposed_is_ignored():
+    m = machine(robot=2, n=3)
+    too_late = 100 + 3 + TUNING.switch_margin_ticks + 1
+    m.step(100, Own(), [share(1, 99, phase=Phase.EXCITE, switch_at=too_late)])
+    assert m.barrier.switch_at == -1
+    m.step(101, Own(), [share(1, 100, phase=Phase.EXCITE, switch_at=too_late)])
+    assert m.barrier.switch_at == too_late  # now it could have been proposed
+
+
+@pytest.mark.parametrize(
+    "phase, own",
+    [(Phase.PUSH, Own(spread=1.0, moment=None)), (Phase.INERTIA, Own(spread=0.0))],
+    ids=["push without J", "inertia without w"],
+)
+def test_a_phase_this_robot_has_no_estimates_for_halts_the_team(phase, own):
+    """Caught up (or told) into a phase whose force law needs what the robot has not
+    estimated: it stops the team rather than push wrongly (or crash)."""
+    m = machine(robot=2, n=3)
+    assert m.step(40, own, [share(1, 39, phase=phase)])
+    assert m.phase is Phase.HALTED and m.since == 40
+    assert m.force(40, own) == (0.0, 0.0)
