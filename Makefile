@@ -4,16 +4,24 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-quick lint bench clean
+.PHONY: demo test test-quick hil lint bench clean
 
 demo: $(STAMP)  ## The paper's scenario, 4 robot processes over Zenoh in real time: table, JSON, plots.
 	$(BIN)/heft demo --out out/paper-results.json --plot out/plots
 
-test: $(STAMP) lint  ## Lint, then run the whole test suite.
-	$(BIN)/python -m pytest -q
+test: $(STAMP) lint  ## Lint, then run the whole test suite (the hardware-in-the-loop part on vcan).
+	$(BIN)/python -m pytest -q -m "not hil"
+	$(MAKE) --no-print-directory hil
+
+hil: $(STAMP)  ## The hardware-in-the-loop tests, on real vcan (in User-Mode Linux if this kernel has none).
+	@if $(BIN)/heft vcan --check; then \
+	  $(BIN)/heft vcan --timeout 1200 -- $(BIN)/python -m pytest -q -m hil -p no:cacheprovider; \
+	else \
+	  $(BIN)/python -m pytest -q -m hil -rs; \
+	fi
 
 test-quick: $(STAMP) lint  ## Lint, then the tests not marked slow (no Zenoh, no processes).
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow and not hil"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

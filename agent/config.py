@@ -11,9 +11,11 @@ import dataclasses
 import enum
 import functools
 import math
+import tomllib
 import types
 import typing
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -105,6 +107,17 @@ def coerce(value: Any, tp: Any, key: str) -> Any:
 @functools.cache
 def _hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The TOML file ``path`` as a dict; :class:`ConfigError` (one line) if it cannot be read
+    or is not TOML."""
+    try:
+        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read ({err.strerror or err})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{path}: not valid TOML: {err}") from None
 
 
 def from_table(cls: type[T], table: Any, where: str) -> T:

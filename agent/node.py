@@ -33,7 +33,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-import tomllib
 from collections import deque
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -49,6 +48,7 @@ from agent.config import (
     bounded,
     check_bounds,
     from_table,
+    read_toml,
 )
 from agent.faults import FaultSettings, FaultyTransport
 from agent.process import RejectLog, stop_on_signals
@@ -140,12 +140,8 @@ class AgentNodeConfig:
 
 def load_agent_config(path: str | Path) -> AgentNodeConfig:
     """Read ``robot.toml``; :class:`ConfigError` (one line naming the key) if it is bad."""
-    try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read ({err.strerror or err})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    data = read_toml(path)
+    data.pop("can", None)  # the robot's AGV bridge's table (bridge/config.py checks it)
     try:
         return from_table(AgentNodeConfig, data, "agent")
     except ConfigError as err:

@@ -14,18 +14,23 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
-    """An event set by SIGINT, SIGTERM or SIGHUP (call from the main thread).
+    """An event set by SIGINT, SIGTERM or SIGHUP. Call it from the main thread before any
+    other thread starts (before the Zenoh session opens, before a bus reader starts).
 
-    The handler runs in the main thread between two bytecodes, possibly while that thread holds
-    the event's own lock (inside ``wait`` or ``set``); setting the event from the handler could
-    then deadlock, so it is set from a short-lived thread instead."""
+    No Python signal handler is involved: the signals are blocked in the calling thread, so
+    every thread started afterwards (Python's and the libraries' native ones) inherits the
+    mask, and one thread of its own takes them with ``sigwait`` and sets the event. A Python
+    handler runs in the main thread between two bytecodes, whatever that thread holds at the
+    time; measured in a bridge process on User-Mode Linux, SIGTERM then left it stuck in a
+    0.01 s wait for good, about 2 times in 3."""
     stop = stop or threading.Event()
+    signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
-    def handler(*_: object) -> None:
-        threading.Thread(target=stop.set, name="stop-signal", daemon=True).start()
+    def take() -> None:
+        signal.sigwait(STOP_SIGNALS)
+        stop.set()
 
-    for sig in STOP_SIGNALS:
-        signal.signal(sig, handler)
+    threading.Thread(target=take, name="stop-signals", daemon=True).start()
     return stop
 
 

@@ -236,8 +236,11 @@ class PlantStatus:
 
 @dataclass(frozen=True, slots=True)
 class BridgeStatus:
-    """An AGV bridge's health: frames each way, decode errors, and its command watchdog
-    (``watchdog`` true while it commands zero force because the agent fell silent)."""
+    """An AGV bridge's health (see :mod:`bridge.bridge`): frames each way, frames rejected
+    by the codec (``decode_errors``), sequence (repeated frames, counter jumps and the frames
+    they lost, ticks without a measurement), commands clamped or refused, error frames, bus
+    reopenings, its command watchdog (``watchdog`` true while it commands zero force because
+    the agent fell silent) and the driver's last heartbeat (``driver_mode`` -1: none yet)."""
 
     robot: int
     tick: int
@@ -247,6 +250,15 @@ class BridgeStatus:
     frames_out: int = 0
     missed_ticks: int = 0
     decode_errors: int = 0
+    repeats: int = 0
+    counter_jumps: int = 0
+    lost_frames: int = 0
+    clamped: int = 0
+    rejected_commands: int = 0
+    bus_errors: int = 0
+    reopens: int = 0
+    driver_mode: int = -1
+    driver_faults: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -275,6 +287,7 @@ class Keys:
     ``heft/<team>/robot/<id>/status``     Status           agent → launcher, displays
     ``heft/<team>/robot/<id>/bridge``     BridgeStatus     AGV bridge → launcher, displays
     ``heft/<team>/robot/<id>/alive``      (liveliness)     agent
+    ``heft/<team>/robot/<id>/bridge/alive`` (liveliness)   AGV bridge
     ``heft/<team>/plant/clock``           Clock            plant → everyone
     ``heft/<team>/plant/truth``           Truth            plant → launcher, displays
     ``heft/<team>/plant/status``          PlantStatus      plant → launcher, displays
@@ -316,6 +329,9 @@ class Keys:
 
     def alive(self, robot: int) -> str:
         return self._robot(robot, "alive")
+
+    def bridge_alive(self, robot: int) -> str:
+        return self._robot(robot, "bridge/alive")
 
     def all_forces(self) -> str:
         return f"{self.root}/robot/*/force"
@@ -621,6 +637,26 @@ def _plant_status(m: PlantStatus) -> None:
 def _bridge_status(m: BridgeStatus) -> None:
     _robot_id("bridge_status.robot", m.robot)
     _within("bridge_status.tick", m.tick, -1, MAX_TICK)
+    for name in _BRIDGE_COUNTERS:
+        _within(f"bridge_status.{name}", getattr(m, name), 0, MAX_TICK)
+    _within("bridge_status.driver_mode", m.driver_mode, -1, 15)
+    _within("bridge_status.driver_faults", m.driver_faults, 0, 255)
+
+
+_BRIDGE_COUNTERS = (
+    "watchdog_trips",
+    "frames_in",
+    "frames_out",
+    "missed_ticks",
+    "decode_errors",
+    "repeats",
+    "counter_jumps",
+    "lost_frames",
+    "clamped",
+    "rejected_commands",
+    "bus_errors",
+    "reopens",
+)
 
 
 def _control(m: Control) -> None:

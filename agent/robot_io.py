@@ -47,11 +47,12 @@ RobotReport = Clock | Truth | PlantStatus | BridgeStatus
 
 @dataclass(frozen=True, slots=True)
 class Liveliness:
-    """Robot ``robot``'s agent appeared (``alive``) or is gone (killed, or hung past its
-    lease)."""
+    """Robot ``robot``'s agent (or, ``who = "bridge"``, its AGV bridge) appeared (``alive``)
+    or is gone (killed, or hung past its lease)."""
 
     robot: int
     alive: bool
+    who: str = "agent"
 
 
 Event = tuple[float, object]

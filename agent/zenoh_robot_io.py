@@ -67,7 +67,8 @@ class _Wire:
             except DecodeError as err:
                 self.port.rejects("liveliness", err)
                 return
-            out.append((at, Liveliness(robot, alive)))
+            who = "bridge" if key == self.keys.bridge_alive(robot) else "agent"
+            out.append((at, Liveliness(robot, alive, who)))
             return
         at, kind, robot, payload = event
         name = kind.__name__.lower()
@@ -131,13 +132,27 @@ class ZenohRobotPort(RobotPort):
 
 
 class ZenohAgentsPort(AgentsPort):
-    """A robot's side over Zenoh, for the agents of ``robots``."""
+    """A robot's side over Zenoh, for the agents of ``robots``.
 
-    def __init__(self, session, keys: Keys, robots: Iterable[int], rejects: RejectLog):
+    With ``bridges`` the robots sit behind AGV bridges (see :mod:`simulator.can_drivers`):
+    their commands come over CAN, not from here, so the port does not subscribe to them, and
+    it watches each robot's bridge's liveliness beside its agent's."""
+
+    def __init__(
+        self,
+        session,
+        keys: Keys,
+        robots: Iterable[int],
+        rejects: RejectLog,
+        bridges: bool = False,
+    ):
         super().__init__(robots, rejects)
         self._wire = _Wire(session, keys, self)
         for i in sorted(self.robots):
-            self._wire.subscribe(keys.force(i), Command, i)
+            if bridges:
+                self._wire.watch(keys.bridge_alive(i))
+            else:
+                self._wire.subscribe(keys.force(i), Command, i)
             self._wire.watch(keys.alive(i))
         self._wire.subscribe(keys.control(), Control, None)
 

@@ -46,6 +46,7 @@ from simulator.scenario import Scenario, ScenarioError, load_scenario, scenario_
 if TYPE_CHECKING:
     from agent.agent import Agent
     from agent.faults import FaultSettings
+    from simulator.can_drivers import CanLink
     from simulator.inprocess import Progress, RunOutcome
 
 PROGRESS_EVERY_S = 5.0
@@ -104,6 +105,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     # is (see _run). Either way the results are written.
     with _StopSignals() as stop:
         scenario = _load(args.scenario)
+        if args.transport is None:  # --can alone runs the processes, as on robots
+            args.transport = "zenoh" if args.can else "inprocess"
+        link = _can_link(args)
         faults = _faults(args, scenario)
         out = None if args.out is None else Path(args.out)
         if out is not None:
@@ -115,7 +119,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"{PROG}: running {scenario.name!r} ({scenario.n} robots)", file=sys.stderr)
         outcome: RunOutcome | None = None
         try:
-            outcome = _run(args, scenario, faults, started, stop)
+            outcome = _run(args, scenario, faults, started, stop, link)
             reason, detail = outcome.reason, outcome.detail
             rejections = outcome.transport.get("rejections")
         except _NothingRecorded as failed:
@@ -182,11 +186,13 @@ def _run(
     faults: FaultSettings,
     started: float,
     stop: _StopSignals,
+    link: CanLink | None = None,
 ) -> RunOutcome:
-    """The run of ``heft run``, in one process or over Zenoh; :class:`_NothingRecorded` when
-    it recorded nothing."""
+    """The run of ``heft run``, in one process or over Zenoh (with ``link``, the robots on
+    CAN behind their bridges); :class:`_NothingRecorded` when it recorded nothing. In one
+    process ``link`` quantises as CAN does."""
     if args.transport == "zenoh":
-        return _run_zenoh(args, scenario, faults, stop.event)
+        return _run_zenoh(args, scenario, faults, stop.event, link)
     from simulator.inprocess import run_inprocess
 
     progress = None if args.quiet else _progress_printer(started, sys.stderr)
@@ -200,7 +206,11 @@ def _run(
     try:
         with stop.raising():
             return run_inprocess(
-                scenario, transport=transport, progress=progress, progress_every=every
+                scenario,
+                transport=transport,
+                progress=progress,
+                progress_every=every,
+                link="memory" if link is None else "can",
             )
     except KeyboardInterrupt:  # before its first instant: nothing to keep
         raise _NothingRecorded(INTERRUPTED, "") from None
@@ -266,9 +276,10 @@ def _run_zenoh(
     scenario: Scenario,
     faults: FaultSettings,
     stop: threading.Event,
+    link: CanLink | None = None,
 ) -> RunOutcome:
-    """The run over Zenoh (:func:`simulator.launcher.run_zenoh`); it stops once ``stop`` is
-    set. :class:`_NothingRecorded` when it recorded nothing."""
+    """The run over Zenoh (:func:`simulator.launcher.run_zenoh`), with ``link`` over CAN
+    too; it stops once ``stop`` is set. :class:`_NothingRecorded` when it recorded nothing."""
     from simulator.launcher import RunFailed, run_zenoh
 
     def report(time_s: float, phases: str) -> None:
@@ -288,6 +299,7 @@ def _run_zenoh(
             progress=report,
             log_stream=stream,
             stop=stop,
+            can=link,
         )
     except RunFailed as failed:
         rejections = failed.transport.get("rejections")
@@ -314,6 +326,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     args.scenario = str(PAPER_SCENARIO)
     args.transport = "zenoh"
+    args.can = False
+    args.can_interface = args.can_channel = None
     args.clock = "realtime"
     args.drop = 0.0
     args.delay_ms = 0.0
@@ -407,8 +421,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     import dataclasses
 
     from agent.config import Bound, bounds
+    from agent.dispatch import NETWORK_UNAVAILABLE
     from agent.process import stop_on_signals
     from agent.protocol import Keys
+    from simulator.can_drivers import CanBusError
     from simulator.node import run_plant
 
     scenario = _load(args.scenario)
@@ -425,14 +441,55 @@ def cmd_sim(args: argparse.Namespace) -> int:
         source = "--team" if args.team else f"{args.scenario}: name (the default --team)"
         raise UsageError(f"{source}: {err}") from None
     settings = zenoh_settings(args, base)
+    link = _can_link(args)
     setup_logging()
-    return run_plant(
-        scenario,
-        team,
-        args.clock,
-        settings,
-        stop_on_signals(),
-        args.start_timeout,
+    try:
+        return run_plant(
+            scenario,
+            team,
+            args.clock,
+            settings,
+            stop_on_signals(),
+            args.start_timeout,
+            link,
+        )
+    except CanBusError as err:  # no such bus (yet): like an unreachable router, may pass
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return NETWORK_UNAVAILABLE
+
+
+def _can_link(args: argparse.Namespace) -> CanLink | None:
+    """The buses of ``--can`` (``--can-interface``, ``--can-channel``), or None without it."""
+    if not args.can:
+        for option in ("can_interface", "can_channel"):
+            if getattr(args, option) is not None:
+                raise UsageError(f"--{option.replace('_', '-')} needs --can")
+        return None
+    from agent.config import ConfigError
+    from simulator.can_drivers import CanLink
+
+    given = {"interface": args.can_interface, "channel": args.can_channel}
+    link = CanLink(**{key: value for key, value in given.items() if value is not None})
+    try:
+        link.validate("--can")
+    except ConfigError as err:
+        raise UsageError(str(err)) from None
+    return link
+
+
+def _add_can_options(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument("--can", action="store_true", help=what)
+    parser.add_argument(
+        "--can-interface",
+        metavar="NAME",
+        help="with --can: the python-can interface of the buses (default: socketcan; virtual"
+        " only within one process)",
+    )
+    parser.add_argument(
+        "--can-channel",
+        metavar="TEMPLATE",
+        help="with --can: robot i's bus, {robot} standing for i; without {robot} every robot"
+        " shares one bus (default: vcan{robot})",
     )
 
 
@@ -459,21 +516,29 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
             "processes (a Zenoh router, the plant, one agent per robot) on 127.0.0.1. Prints\n"
             "a table of every robot's estimates (m, J, contact-to-COM offset) and their errors\n"
             "against the ground truth, and when each step started and ended.\n\n"
+            "With --can the robots are AGVs on CAN: the plant plays their drivers on one bus\n"
+            "per robot and an AGV bridge per robot (heft bridge) links each to its agent;\n"
+            "--can implies --transport zenoh, and --transport inprocess --can is its reference\n"
+            "in one process (measurements and commands quantised as on the bus).\n\n"
             "Exit status: 0 converged, 1 not converged (out of time, or a robot was lost),\n"
             "2 bad scenario or arguments, 130 interrupted."
         ),
         epilog=(
             "examples:\n"
             "  heft run simulator/scenarios/paper.toml --out results.json --plot plots\n"
-            "  heft run simulator/scenarios/paper.toml --transport zenoh --drop 0.1"
+            "  heft run simulator/scenarios/paper.toml --transport zenoh --drop 0.1\n"
+            "  heft run simulator/scenarios/paper.toml --can --can-channel 'vcan{robot}'"
         ),
     )
     parser.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
     parser.add_argument(
         "--transport",
         choices=("inprocess", "zenoh"),
-        default="inprocess",
-        help="inprocess: one process; zenoh: one process per robot (default: inprocess)",
+        help="inprocess: one process; zenoh: one process per robot (default: inprocess, or"
+        " zenoh with --can)",
+    )
+    _add_can_options(
+        parser, "the robots on CAN, each behind its AGV bridge (a heft bridge per robot)"
     )
     parser.add_argument(
         "--clock",
@@ -603,11 +668,20 @@ def _add_sim(commands: argparse._SubParsersAction) -> None:
             "measurements, applies each robot's force commands and publishes the truth. It\n"
             "starts once every robot's agent is up, and runs until the team is done or\n"
             "SIGINT/SIGTERM/SIGHUP.\n\n"
+            "With --can it plays every AGV's driver on CAN instead (bridge/agv.dbc): robot i's\n"
+            "Sync, Odometry, AppliedForce and Heartbeat frames on its bus, its ForceCommand\n"
+            "frames from its AGV bridge (heft bridge), which talks to the agent; it then also\n"
+            "waits for every robot's bridge, and takes no measurement or command over Zenoh.\n\n"
             "Exit status: 0 done or stopped, 1 the agents were not all up within\n"
             "--start-timeout, 2 bad scenario or arguments, or no router within\n"
-            "--connect-timeout-ms."
+            "--connect-timeout-ms, 4 a CAN bus could not be opened."
         ),
-        epilog="example: heft sim simulator/scenarios/paper.toml --team paper --clock realtime",
+        epilog=(
+            "examples:\n"
+            "  heft sim simulator/scenarios/paper.toml --team paper --clock realtime\n"
+            "  heft sim simulator/scenarios/paper.toml --team paper --can --can-channel"
+            " 'vcan{robot}'"
+        ),
     )
     sim.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
     sim.add_argument("--team", help="team name in the key expressions (default: scenario name)")
@@ -624,6 +698,7 @@ def _add_sim(commands: argparse._SubParsersAction) -> None:
         metavar="S",
         help="give up if the agents are not all up after S seconds, in (0, 3600] (default: 30)",
     )
+    _add_can_options(sim, "play the AGVs' drivers on CAN, behind one AGV bridge per robot")
     add_zenoh_options(sim, connect=DEFAULT_ROUTER, listen="none")
     sim.add_argument(
         "--connect-timeout-ms",

@@ -7,6 +7,11 @@ go to the plant, their messages go through the transport, and the plant advances
 period. The run ends once every agent has reached the ``done`` phase, or at the scenario's
 ``max_time_s``. Ground truth is recorded beside the agents' estimates of the same instant, for
 evaluation only (an agent that lost a message may lag a tick: such instants are not recorded).
+
+``link="can"`` is the reference of a run over the AGVs' CAN buses (``heft run --can``): every
+measurement and every command is clamped and quantised as it is when it crosses the bus
+(:class:`~simulator.can_drivers.CanQuantiser`), so that a lockstep run over CAN gives the same
+estimates.
 """
 
 from __future__ import annotations
@@ -24,6 +29,9 @@ from simulator.plant import Plant
 from simulator.scenario import Scenario
 
 Progress = Callable[[int, float, list[Agent]], None]
+LINKS = ("memory", "can")
+"""How the robots' measurements and commands reach the agents in :func:`run_inprocess`: as
+they are, or quantised as on the AGVs' CAN buses."""
 ALIGN_TICKS = 64
 """Ticks a finishing run waits for every agent's estimates to refer to the same instant."""
 
@@ -85,8 +93,17 @@ def run_inprocess(
     record_every: int = 5,
     progress: Progress | None = None,
     progress_every: int = 100,
+    link: str = "memory",
 ) -> RunOutcome:
-    """Run ``scenario`` to convergence (or its time limit) in this process."""
+    """Run ``scenario`` to convergence (or its time limit) in this process; ``link`` is one
+    of :data:`LINKS` (see the module docstring)."""
+    if link not in LINKS:
+        raise ValueError(f"link must be one of {LINKS}, got {link!r}")
+    quantiser = None
+    if link == "can":
+        from simulator.can_drivers import CanQuantiser
+
+        quantiser = CanQuantiser(scenario.period_s)
     plant = Plant(scenario)
     agents = make_agents(scenario)
     transport = transport or InMemoryTransport(scenario.n, scenario.edges)
@@ -104,10 +121,13 @@ def run_inprocess(
     try:
         while k <= give_up:
             measurements = plant.measure()
+            if quantiser is not None:
+                measurements = [quantiser.measurement(m) for m in measurements]
             shares = []
             for agent, measurement in zip(agents, measurements):
                 command, share = agent.step(measurement, transport.receive(agent.robot))
-                plant.command(agent.robot, command.force)
+                force = command.force if quantiser is None else quantiser.force(command.force)
+                plant.command(agent.robot, force)
                 shares.append(share)
             for share in shares:
                 transport.send(share)

@@ -6,13 +6,19 @@ multicast scouting off. It prefixes every child's log lines with its name, liste
 agents' estimates and status and to the plant's truth (as any display would), and builds the
 same :class:`~simulator.inprocess.RunOutcome` as the in-process run.
 
+With ``can`` (``heft run --can``) the robots are AGVs on CAN: the plant plays their drivers
+(``heft sim --can``, one bus per robot by default) and the launcher also starts one AGV bridge
+per robot (``heft bridge``, its ``bridge-i.toml`` with a ``[can]`` table), which links the
+robot's bus to its agent. A bridge is supervised as an agent is: one that dies is a lost robot.
+The bridges' statuses go into the transport report (``bridges``).
+
 Supervision. The launcher watches every process it started, not only what the team says:
 
 - the team done → converged (``reason`` ``""``);
-- the team halted, or an agent process gone → ``robot(s) [i, ...] lost``;
+- the team halted, or an agent (or bridge) process gone → ``robot(s) [i, ...] lost``;
 - the router or the plant process gone → ``router lost``, ``plant lost``;
-- an agent gone before the run started, or the plant giving up waiting for them →
-  ``agents did not come up``;
+- an agent (or bridge) gone before the run started, or the plant giving up waiting for them
+  → ``agents did not come up``;
 - the plant at the scenario's end → ``out of simulated time (run.max_time_s = … s)``;
 - nothing heard from the plant for :data:`STALL_S` → ``stalled`` (the plant or router hangs);
 - too long on the wall clock → ``wall-clock timeout``; asked to stop → ``interrupted``.
@@ -29,6 +35,7 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import json
 import logging
 import os
 import re
@@ -42,13 +49,14 @@ import time
 from collections import defaultdict
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from agent.config import to_toml
 from agent.faults import FaultSettings
 from agent.node import AgentNodeConfig
 from agent.process import EventQueue, RejectLog
 from agent.protocol import (
+    BridgeStatus,
     Control,
     DecodeError,
     Estimates,
@@ -64,6 +72,9 @@ from agent.zenoh_session import SessionError, ZenohSettings, open_session
 from simulator.history import History
 from simulator.inprocess import RunOutcome, Sample
 from simulator.scenario import Scenario, scenario_to_toml
+
+if TYPE_CHECKING:
+    from simulator.can_drivers import CanLink
 
 Progress = Callable[[float, str], None]
 PR_SET_PDEATHSIG = 1
@@ -83,9 +94,8 @@ DEATH_SIGNAL = signal.SIGKILL
 
 Not SIGTERM, measured: the kernel sends the parent-death signal again each time the child is
 handed to another of the dying launcher's threads, so a child gets a burst of them; the
-processes' handler (``agent.process.stop_on_signals``: ``Event.set`` in a signal handler) is
-not re-entrant and deadlocks when one arrives while it runs (about 1 launcher kill in 25 left
-an agent or the plant behind), and ``heft router`` sometimes never wakes from its wait. The
+processes' handlers were not re-entrant and deadlocked when one arrived while another ran
+(about 1 launcher kill in 25 left an agent or the plant behind). The
 launcher is gone and nothing is recorded: there is nothing for a child to save."""
 HALT_GRACE_S = 0.5
 AGENT_GONE_S = 3.0
@@ -100,6 +110,9 @@ TICK_SLACK = 1000
 processes cross on the way, and a loaded machine delays some (10 s at 100 Hz)."""
 KEEP_TICKS = 500
 """Ticks of unmatched estimates and truth the collector keeps (a robot may lag behind)."""
+BRIDGE_WATCHDOG_MS = 200
+"""The bridges' command watchdog in a CAN run: 20 sensor periods of the paper at 100 Hz (in
+lockstep a tripped watchdog changes nothing: the plant waits for the agent's command)."""
 LOG = logging.getLogger("heft.launcher")
 
 
@@ -127,6 +140,27 @@ def robot_toml(
         tuning=scenario.agent,
     )
     return to_toml(config, f"Agent of robot {robot} of scenario {scenario.name!r}, by heft run.")
+
+
+def can_table(robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS) -> str:
+    """The ``[can]`` table of robot ``robot``'s ``robot.toml`` in a CAN run, which its AGV
+    bridge (``heft bridge``) reads beside the agent's part: its robot's bus, as the plant
+    opens it; node id = robot id; the tick from the plant's ``Sync`` frames."""
+    lines = [
+        "",
+        "[can]",
+        f"interface = {_toml_string(can.interface)}",
+        f"channel = {_toml_string(can.channel_of(robot))}",
+        f"node = {robot}",
+        f"watchdog_ms = {int(watchdog_ms)}",
+        'time_source = "sync"',
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _toml_string(text: str) -> str:
+    """``text`` as a TOML basic string (JSON's escapes are TOML's)."""
+    return json.dumps(text, ensure_ascii=False)
 
 
 _prctl = None
@@ -285,6 +319,8 @@ class Collector:
         self.halted = False
         self.lost: set[int] = set()
         self.plant_status: PlantStatus | None = None
+        self.bridges: dict[int, BridgeStatus] = {}
+        """Each robot's bridge's latest status (a CAN run)."""
         self.latest: Sample | None = None
         """The newest complete sample before the team was done."""
         self.final: Sample | None = None
@@ -299,6 +335,7 @@ class Collector:
             self._subscribe(session, keys.all_statuses(), Status),
             self._subscribe(session, keys.truth(), Truth),
             self._subscribe(session, keys.plant_status(), PlantStatus),
+            self._subscribe(session, keys.all_bridges(), BridgeStatus),
         ]
 
     def _subscribe(self, session, key: str, kind: type):
@@ -309,7 +346,7 @@ class Collector:
         self.events.drain(lambda event: self._handle(*event), timeout)
 
     def _handle(self, kind: type, payload: bytes) -> None:
-        if self._finished and kind is not PlantStatus:
+        if self._finished and kind not in (PlantStatus, BridgeStatus):
             return  # the verdict is in: what the team says while it shuts down changes nothing
         try:
             message = decode(kind, payload)
@@ -323,7 +360,8 @@ class Collector:
         # No robot's instant and no truth is ever far ahead of the newest truth (the plant
         # starts at tick 0).
         tick = getattr(message, "tick", 0)
-        if not isinstance(message, PlantStatus) and tick > self.latest_tick + TICK_SLACK:
+        counters = isinstance(message, (PlantStatus, BridgeStatus))
+        if not counters and tick > self.latest_tick + TICK_SLACK:
             why = "tick out of window"
             self.rejects(kind.__name__, f"tick {tick} at tick {self.latest_tick}", why)
             return
@@ -337,6 +375,8 @@ class Collector:
             self.latest_tick = max(self.latest_tick, message.tick)
             self.truths[message.tick] = message
             self._complete(message.tick)
+        elif isinstance(message, BridgeStatus):
+            self.bridges[message.robot] = message
         else:
             self.plant_status = message
             if not self._finished:
@@ -465,8 +505,10 @@ def run_zenoh(
     log_stream: TextIO | None = None,
     wall_timeout_s: float | None = None,
     stop: threading.Event | None = None,
+    can: CanLink | None = None,
 ) -> RunOutcome:
-    """Run ``scenario`` with one process per robot over Zenoh (see the module docstring).
+    """Run ``scenario`` with one process per robot over Zenoh (see the module docstring);
+    with ``can``, the robots on CAN behind one AGV bridge each.
 
     The run ends early, with the verdict ``interrupted``, once ``stop`` is set (``heft run``
     sets it on SIGINT, SIGTERM and SIGHUP) or on ``KeyboardInterrupt``; the processes are
@@ -502,23 +544,35 @@ def run_zenoh(
                 collector = Collector(session, keys, scenario.n, record_every)
                 plant: Child | None = None
                 agents: list[Child] = []
+                bridges: list[Child] = []
                 try:
                     try:
                         if not stop.is_set():
                             plant = start(
                                 "plant",
                                 ["sim", str(scenario_file), "--team", team, "--clock", clock]
-                                + ["--connect", router],
+                                + ["--connect", router]
+                                + _can_options(can),
                             )
                         for i in range(1, scenario.n + 1):
                             if stop.is_set():
                                 break
                             config = folder / f"robot-{i}.toml"
                             text = robot_toml(i, scenario, team, clock, router, faults)
+                            if can is not None:
+                                text += can_table(i, can)
                             config.write_text(text, encoding="utf-8")
+                            if can is not None:
+                                args = ["bridge", "--config", str(config)]
+                                bridges.append(start(f"bridge {i}", args))
                             agents.append(start(f"robot {i}", ["agent", "--config", str(config)]))
-                        if plant is not None and len(agents) == scenario.n:
-                            watch = _Watch(collector, router_child, plant, agents, scenario)
+                        all_up = len(agents) == scenario.n
+                        if can is not None:
+                            all_up = all_up and len(bridges) == scenario.n
+                        if plant is not None and all_up:
+                            watch = _Watch(
+                                collector, router_child, plant, agents, scenario, bridges
+                            )
                             verdict = watch.run(
                                 stop, progress, progress_every_s, started + wall_timeout_s
                             )
@@ -526,7 +580,7 @@ def run_zenoh(
                         verdict = Verdict(INTERRUPTED, "asked to stop")
                     collector.conclude()  # agents leaving from now on are not lost robots
                     cpu.update({child.name: child.cpu_seconds() for child in children})
-                    _shut_down(session, keys, collector, router_child, plant, agents)
+                    _shut_down(session, keys, collector, router_child, plant, agents + bridges)
                 finally:
                     collector.close()
         finally:
@@ -565,10 +619,18 @@ def _launcher_session(router: str, router_child: Child):
         raise RunFailed(ROUTER_LOST, {}, detail) from None
 
 
+def _can_options(can: CanLink | None) -> list[str]:
+    """``heft sim``'s options for the robots' buses (none without CAN)."""
+    if can is None:
+        return []
+    return ["--can", "--can-interface", can.interface, "--can-channel", can.channel]
+
+
 def _shut_down(
     session, keys: Keys, collector: Collector, router: Child, plant: Child | None, agents
 ) -> None:
-    """Stop the plant, then the agents; the router stays up until the caller stops it."""
+    """Stop the plant, then the agents (and the bridges, with them); the router stays up
+    until the caller stops it."""
     if plant is not None:  # the plant first, so that it never sees the agents leave as lost
         stop_all([plant])
     if router.process.poll() is None:  # without a router, nobody hears the stop message
@@ -581,7 +643,7 @@ def _shut_down(
 def _transport_report(collector: Collector | None, cpu: dict[str, float | None]) -> dict:
     if collector is None:
         return {"cpu_s": cpu}
-    return {
+    report = {
         "plant": dataclasses.asdict(collector.plant_status) if collector.plant_status else None,
         "lost": sorted(collector.lost),
         "halted": collector.halted,
@@ -594,6 +656,12 @@ def _transport_report(collector: Collector | None, cpu: dict[str, float | None])
             else None
         ),
     }
+    if collector.bridges:
+        report["bridges"] = {
+            str(robot): dataclasses.asdict(status)
+            for robot, status in sorted(collector.bridges.items())
+        }
+    return report
 
 
 class _Watch:
@@ -607,14 +675,18 @@ class _Watch:
         plant: Child,
         agents: list[Child],
         scenario: Scenario,
+        bridges: Sequence[Child] = (),
     ):
         self.collector = collector
         self.router = router
         self.plant = plant
         self.agents = agents
+        self.bridges = list(bridges)
+        """Robot ``i``'s AGV bridge at ``i - 1`` (a CAN run; none otherwise)."""
         self.scenario = scenario
-        self.gone: dict[int, tuple[float, int]] = {}
-        """Robots whose agent process exited mid-run: when, and its exit code."""
+        self.gone: dict[int, tuple[float, int, str]] = {}
+        """Robots whose agent (or bridge) process exited mid-run: when, its exit code, and
+        which (``agent``, ``bridge``)."""
         self.tick_seen = -1
         self.tick_seen_at = time.perf_counter()
 
@@ -652,14 +724,19 @@ class _Watch:
         collector = self.collector
         if collector.halted or self.gone:
             lost = sorted(set(collector.lost) | set(self.gone))
-            ended: dict[str, list[int]] = defaultdict(list)
-            for i, (_, code) in sorted(self.gone.items()):
-                ended[describe_exit(code)].append(i)
+            ended: dict[tuple[str, str], list[int]] = defaultdict(list)
+            for i, (_, code, which) in sorted(self.gone.items()):
+                ended[which, describe_exit(code)].append(i)
             exits = "; ".join(
-                f"the agent process of robot(s) {robots} ended ({how})"
-                for how, robots in ended.items()
+                f"the {which} process of robot(s) {robots} ended ({how})"
+                for (which, how), robots in ended.items()
             )
-            why = "the team halted" if collector.halted else "no neighbour was left to halt it"
+            if collector.halted:
+                why = "the team halted"
+            elif any(which == "bridge" for _, _, which in self.gone.values()):
+                why = "the team did not halt (agents do not watch the bridges)"
+            else:
+                why = "no neighbour was left to halt it"
             detail = (
                 f"{exits + '; ' if exits else ''}{why} at {self._t()}"
                 " (n is fixed: estimates without a robot would be wrong)"
@@ -681,17 +758,20 @@ class _Watch:
                 return self._team()
             return self._plant_exit(code)
         now = time.perf_counter()
-        for i, child in enumerate(self.agents, start=1):
+        robots = [(i, child, "agent") for i, child in enumerate(self.agents, start=1)]
+        robots += [(i, child, "bridge") for i, child in enumerate(self.bridges, start=1)]
+        for i, child, which in robots:
             code = child.process.poll()
             if code is None or i in self.gone:
                 continue
             if collector.first_truth_at is None:
+                ended = child.ended(code)
                 return Verdict(
                     AGENTS_NOT_UP,
-                    f"robot {i}'s agent process ended before the run started ({child.ended(code)})",
+                    f"robot {i}'s {which} process ended before the run started ({ended})",
                 )
-            self.gone[i] = (now, code)  # its neighbours should halt the team: give them time
-        if self.gone and now - min(t for t, _ in self.gone.values()) > AGENT_GONE_S:
+            self.gone[i] = (now, code, which)  # its neighbours should halt the team: wait
+        if self.gone and now - min(t for t, _, _ in self.gone.values()) > AGENT_GONE_S:
             return self._team()
         return None
 
@@ -701,7 +781,8 @@ class _Watch:
         how = describe_exit(code)
         if collector.first_truth_at is None:
             if code == 1:  # the plant's --start-timeout: see heft sim
-                return Verdict(AGENTS_NOT_UP, "the plant gave up waiting for the agents")
+                which = "agents and bridges" if self.bridges else "agents"
+                return Verdict(AGENTS_NOT_UP, f"the plant gave up waiting for the {which}")
             ended = self.plant.ended(code)
             return Verdict(PLANT_LOST, f"the plant process ended before it started ({ended})")
         status = collector.plant_status

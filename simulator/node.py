@@ -13,6 +13,12 @@ counters.
   and counted, and the latency from publishing a tick to receiving each command is measured.
 
 Robots whose agent's liveliness ends get zero force from then on.
+
+The port is the robots' hardware as the plant stands in for it: Zenoh
+(:class:`~agent.zenoh_robot_io.ZenohAgentsPort`) when the agents talk to the plant directly,
+or the AGVs' CAN buses (:class:`~simulator.can_drivers.CanDriversPort`, ``heft sim --can``)
+when each robot's AGV bridge stands between them; then a robot is up once its agent and its
+bridge are, and lost when either is gone.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ import statistics
 import threading
 import time
 from collections import deque
+from typing import TYPE_CHECKING
 
 from agent.process import RejectLog
 from agent.protocol import Clock, Command, Control, Keys, Measurement, PlantStatus
@@ -30,6 +37,9 @@ from agent.zenoh_robot_io import ZenohAgentsPort
 from agent.zenoh_session import ZenohSettings, open_session
 from simulator.plant import Plant
 from simulator.scenario import Scenario
+
+if TYPE_CHECKING:
+    from simulator.can_drivers import CanLink
 
 log = logging.getLogger("heft.sim")
 LATENCY_SAMPLES = 10_000
@@ -93,13 +103,14 @@ class PlantNode:
                     self.alive.add(robot)
                 return
             if self.stop.is_set():
-                log.info("robot %d: agent left (the run is over)", robot)
+                log.info("robot %d: %s left (the run is over)", robot, item.who)
                 self.alive.discard(robot)
                 return
             if robot not in self.lost:
                 log.warning(
-                    "robot %d: agent gone at t = %.2f s; it pushes no more",
+                    "robot %d: %s gone at t = %.2f s; it pushes no more",
                     robot,
+                    item.who,
                     self.plant.time_s,
                 )
             self.lost.add(robot)
@@ -162,7 +173,7 @@ class PlantNode:
             if time.monotonic() > deadline:
                 missing = sorted(set(range(1, n + 1)) - self.alive)
                 log.error(
-                    "agents of robots %s did not come up within %.0f s",
+                    "robots %s were not up (agent, and bridge if any) within %.0f s",
                     missing,
                     self.start_timeout_s,
                 )
@@ -237,12 +248,34 @@ def run_plant(
     zenoh: ZenohSettings,
     stop: threading.Event,
     start_timeout_s: float = 30.0,
+    can: CanLink | None = None,
 ) -> int:
-    """Run the plant of ``scenario`` on Zenoh for team ``team`` until it is done or stopped."""
+    """Run the plant of ``scenario`` on Zenoh for team ``team`` until it is done or stopped;
+    with ``can``, the robots are on CAN buses behind their AGV bridges (``heft sim --can``:
+    :class:`~simulator.can_drivers.CanBusError` if a bus cannot be opened)."""
     rejects = RejectLog(log, "plant")
-    with open_session(zenoh) as session:
-        port = ZenohAgentsPort(session, Keys(team), range(1, scenario.n + 1), rejects)
-        try:
-            return PlantNode(scenario, port, clock, stop, start_timeout_s).run()
-        finally:
-            port.close()
+    robots = range(1, scenario.n + 1)
+    if can is None:
+        with open_session(zenoh) as session:
+            port = ZenohAgentsPort(session, Keys(team), robots, rejects)
+            try:
+                return PlantNode(scenario, port, clock, stop, start_timeout_s).run()
+            finally:
+                port.close()
+    from simulator.can_drivers import CanDriversPort, close_buses, open_buses
+
+    buses = open_buses(can, robots)
+    log.info(
+        "robots on CAN: %s",
+        ", ".join(f"{i} on {can.interface}/{can.channel_of(i)}" for i in robots),
+    )
+    try:
+        with open_session(zenoh) as session:
+            rest = ZenohAgentsPort(session, Keys(team), robots, rejects, bridges=True)
+            port = CanDriversPort(rest, buses, clock)
+            try:
+                return PlantNode(scenario, port, clock, stop, start_timeout_s).run()
+            finally:
+                port.close()
+    finally:
+        close_buses(buses.values())

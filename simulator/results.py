@@ -232,6 +232,8 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
         "errors": errors(outcome),
         "rejections": rejection_counts(outcome.transport.get("rejections")),
     }
+    if "bridges" in outcome.transport:  # a run over CAN: each robot's AGV bridge's counters
+        document["bridges"] = outcome.transport["bridges"]
     if outcome.converged:
         del document["detail"]  # a sentence saying why not: only when it did not
     return document
@@ -365,7 +367,21 @@ def format_table(outcome: RunOutcome) -> str:
     rejected = _rejections_line(outcome.transport.get("rejections"))
     if rejected:
         lines.append(rejected)
+    bridges = _bridges_line(outcome.transport.get("bridges"))
+    if bridges:
+        lines.append(bridges)
     return "\n".join(lines)
+
+
+def _bridges_line(bridges: dict | None) -> str:
+    """One line of the AGV bridges' counters summed over robots (a CAN run; ``""`` else)."""
+    if not bridges:
+        return ""
+    keys = ("frames_in", "frames_out", "missed_ticks", "decode_errors", "watchdog_trips")
+    total = {key: sum(int(b.get(key) or 0) for b in bridges.values()) for key in keys}
+    return f"{len(bridges)} AGV bridges: " + ", ".join(
+        f"{key.replace('_', ' ')} {value}" for key, value in total.items()
+    )
 
 
 def _rejections_line(rejections: dict | None) -> str:

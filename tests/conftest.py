@@ -11,6 +11,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import pytest
+
 if TYPE_CHECKING:
     from simulator.inprocess import RunOutcome
 
@@ -35,6 +37,38 @@ def worst_errors(outcome: RunOutcome) -> dict[str, float]:
             err = math.dist(z, (pi[0] - pj[0], pi[1] - pj[1]))
             worst["relative"] = max(worst["relative"], err)
     return worst
+
+
+ESTIMATED = (
+    "omega",
+    "spread",
+    "moment",
+    "mass",
+    "centroid_offset",
+    "com_offset",
+    "com_observer",
+    "com_velocity",
+    "contact_to_com",
+)
+
+
+def assert_same_estimates(a: RunOutcome, b: RunOutcome, tol: float = 1e-9) -> None:
+    """Every robot's every estimate at the same final instant, to ``tol`` (relative)."""
+    assert a.ticks == b.ticks and a.sim_time_s == b.sim_time_s
+    assert a.final.estimates.keys() == b.final.estimates.keys()
+    for i, x in a.final.estimates.items():
+        y = b.final.estimates[i]
+        assert (x.tick, x.phase, x.phase_since) == (y.tick, y.phase, y.phase_since)
+        for name in ESTIMATED:
+            u, v = getattr(x, name), getattr(y, name)
+            assert (u is None) == (v is None), name
+            if u is not None:
+                u, v = (u, v) if isinstance(u, tuple) else ((u,), (v,))
+                assert math.dist(u, v) <= tol * max(1.0, math.hypot(*u)), (i, name, u, v)
+        assert x.relative_positions.keys() == y.relative_positions.keys()
+        for j, z in x.relative_positions.items():
+            assert math.dist(z, y.relative_positions[j]) <= tol * max(1.0, math.hypot(*z))
+        assert (x.started, x.settled) == (y.started, y.settled)
 
 
 def assert_within(outcome: RunOutcome, rel: float, metres: float) -> None:
@@ -120,3 +154,21 @@ def agent_pid(sid: int, robot: int, timeout: float = 20.0) -> int:
 def wait_for(process: subprocess.Popen, timeout: float = 60.0) -> tuple[int, str]:
     _, err = process.communicate(timeout=timeout)
     return process.returncode, err
+
+
+VCAN_HELP = (
+    "no vcan here: run `make hil` (heft vcan -- pytest -m hil); to enable: sudo modprobe vcan"
+    " (or deploy/vcan-setup.sh), or apt-get install user-mode-linux kmod"
+)
+
+
+@pytest.fixture(scope="session")
+def vcan() -> None:
+    """For hardware-in-the-loop tests: vcan1... exist (inside ``heft vcan``, or a kernel that
+    has them); otherwise a skip saying how to get them, or a failure where CI requires them
+    (``HEFT_REQUIRE_VCAN=1``)."""
+    if os.environ.get("HEFT_VCAN") == "1" or Path("/sys/class/net/vcan1").exists():
+        return
+    if os.environ.get("HEFT_REQUIRE_VCAN") == "1":
+        pytest.fail(f"vcan unavailable but HEFT_REQUIRE_VCAN=1: {VCAN_HELP}")
+    pytest.skip(VCAN_HELP)

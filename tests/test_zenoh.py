@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import os
 import signal
 import threading
@@ -21,12 +20,13 @@ from agent.node import AgentNodeConfig, zenoh_agent_node
 from agent.protocol import Keys, Measurement, Share, encode
 from agent.zenoh_session import ZenohSettings, open_session
 from simulator.generate import generate_scenario
-from simulator.inprocess import RunOutcome, run_inprocess
+from simulator.inprocess import run_inprocess
 from simulator.launcher import free_port, run_zenoh
 from simulator.scenario import load_scenario
 from tests.conftest import (
     PAPER,
     agent_pid,
+    assert_same_estimates,
     assert_within,
     children_of,
     in_session,
@@ -37,38 +37,6 @@ from tests.conftest import (
 pytestmark = pytest.mark.slow  # Zenoh sessions and processes
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-ESTIMATED = (
-    "omega",
-    "spread",
-    "moment",
-    "mass",
-    "centroid_offset",
-    "com_offset",
-    "com_observer",
-    "com_velocity",
-    "contact_to_com",
-)
-
-
-def assert_same_estimates(a: RunOutcome, b: RunOutcome, tol: float = 1e-9) -> None:
-    """Every robot's every estimate at the same final instant, to ``tol`` (relative)."""
-    assert a.ticks == b.ticks and a.sim_time_s == b.sim_time_s
-    assert a.final.estimates.keys() == b.final.estimates.keys()
-    for i, x in a.final.estimates.items():
-        y = b.final.estimates[i]
-        assert (x.tick, x.phase, x.phase_since) == (y.tick, y.phase, y.phase_since)
-        for name in ESTIMATED:
-            u, v = getattr(x, name), getattr(y, name)
-            assert (u is None) == (v is None), name
-            if u is not None:
-                u, v = (u, v) if isinstance(u, tuple) else ((u,), (v,))
-                assert math.dist(u, v) <= tol * max(1.0, math.hypot(*u)), (i, name, u, v)
-        assert x.relative_positions.keys() == y.relative_positions.keys()
-        for j, z in x.relative_positions.items():
-            assert math.dist(z, y.relative_positions[j]) <= tol * max(1.0, math.hypot(*z))
-        assert (x.started, x.settled) == (y.started, y.settled)
 
 
 @pytest.mark.parametrize("which", ["paper", "generated-8-robots"])

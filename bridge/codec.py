@@ -1,0 +1,253 @@
+"""Typed AGV frames ↔ python-can messages, through the DBC file (no hand-packed bytes).
+
+:class:`AgvCodec` loads ``bridge/agv.dbc`` (see :mod:`bridge.dbc` for the frames) and turns a
+:class:`Sync`, :class:`Odometry`, :class:`ForceCommand`, :class:`AppliedForce` or
+:class:`Heartbeat` into a ``can.Message`` and back. Decoding trusts nothing: a frame is
+rejected with a :class:`FrameError` whose ``reason`` (one of :data:`REASONS`) is what the
+bridge counts, unless it is a data frame with a standard id of the protocol, 8 bytes, a
+matching checksum and every signal within its DBC range.
+
+What the codec does not judge is sequence (counters, ticks, watchdogs): that needs state, and
+lives in :mod:`bridge.bridge` and :mod:`bridge.timing`.
+
+Values cross the bus quantised to the DBC's resolution. :meth:`AgvCodec.quantize_velocity` and
+:meth:`AgvCodec.quantize_force` give exactly what a receiver decodes, so an in-process run can
+reproduce a run over CAN bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+import cantools
+from crc import Calculator, Crc8
+
+from bridge.dbc import (
+    APPLIED_FORCE_BASE,
+    DBC_PATH,
+    FORCE_COMMAND_BASE,
+    FRAME_LENGTH,
+    HEARTBEAT_BASE,
+    MAX_FORCE,
+    MAX_NODE,
+    ODOMETRY_BASE,
+    SYNC_ID,
+)
+
+Vec2 = tuple[float, float]
+
+COUNTER_MODULO = 16
+"""Every frame's ``Counter`` counts modulo 16 (4 bits)."""
+
+REASONS = (
+    "error frame",
+    "remote frame",
+    "extended id",
+    "unknown id",
+    "wrong length",
+    "checksum",
+    "out of range",
+)
+"""Why :meth:`AgvCodec.decode` rejects a frame (the bridge's counter keys)."""
+
+
+class FrameError(ValueError):
+    """A frame that is not a valid protocol frame; ``reason`` is one of :data:`REASONS`."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+@dataclass(frozen=True, slots=True)
+class Sync:
+    """The bus master opens ``tick`` (``counter = tick % 16``)."""
+
+    tick: int
+
+    @property
+    def counter(self) -> int:
+        return self.tick % COUNTER_MODULO
+
+
+@dataclass(frozen=True, slots=True)
+class Odometry:
+    """AGV ``node``'s contact-point velocity (m/s, world frame) sampled at the tick whose
+    counter is ``counter``."""
+
+    node: int
+    counter: int
+    velocity: Vec2
+
+
+@dataclass(frozen=True, slots=True)
+class ForceCommand:
+    """The force (N, world frame) AGV ``node`` applies from the tick whose counter is
+    ``counter``; ``apply`` false is the watchdog's ZERO mode (no force, whatever ``force``
+    says)."""
+
+    node: int
+    counter: int
+    force: Vec2
+    apply: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class AppliedForce:
+    """The force (N, world frame) AGV ``node`` measured itself applying over the period that
+    ended at the tick whose counter is ``counter``."""
+
+    node: int
+    counter: int
+    force: Vec2
+
+
+@dataclass(frozen=True, slots=True)
+class Heartbeat:
+    """AGV ``node``'s driver state: ``mode`` (see :data:`bridge.dbc.DRIVER_MODES`) and fault
+    bits (:data:`bridge.dbc.FAULT_BITS`); ``counter`` counts heartbeats."""
+
+    node: int
+    counter: int
+    mode: int
+    faults: int = 0
+
+
+Frame = Sync | Odometry | ForceCommand | AppliedForce | Heartbeat
+
+_BASES = {
+    ODOMETRY_BASE: Odometry,
+    FORCE_COMMAND_BASE: ForceCommand,
+    APPLIED_FORCE_BASE: AppliedForce,
+    HEARTBEAT_BASE: Heartbeat,
+}
+_BASE_OF = {kind: base for base, kind in _BASES.items()}
+_CALCULATORS = threading.local()
+"""One CRC calculator per thread: a ``crc.Calculator`` keeps its register between calls, so
+two threads sharing one corrupt each other's checksums."""
+
+
+def clamp_force(force: Vec2) -> tuple[Vec2, bool]:
+    """``force`` with each axis clamped to ±:data:`~bridge.dbc.MAX_FORCE`, and whether it had
+    to be (the bridge counts clamps). Non-finite values are the caller's to reject."""
+    fx = min(max(force[0], -MAX_FORCE), MAX_FORCE)
+    fy = min(max(force[1], -MAX_FORCE), MAX_FORCE)
+    return (fx, fy), (fx, fy) != (force[0], force[1])
+
+
+def checksum(frame_id: int, data: bytes) -> int:
+    """CRC-8 (SAE J1850) of the id's two bytes (little-endian) and data bytes 0–6."""
+    calculator = getattr(_CALCULATORS, "crc8", None)
+    if calculator is None:
+        calculator = _CALCULATORS.crc8 = Calculator(Crc8.SAEJ1850, optimized=True)
+    return calculator.checksum(frame_id.to_bytes(2, "little") + bytes(data[:7]))
+
+
+class AgvCodec:
+    """Encodes and decodes the frames of ``bridge/agv.dbc``."""
+
+    def __init__(self, path: Path = DBC_PATH):
+        self.database = cantools.database.load_file(str(path), strict=True)
+        self._messages = {m.frame_id: m for m in self.database.messages}
+
+    # ------------------------------------------------------------------ encoding
+    def encode(self, frame: Frame, timestamp: float = 0.0) -> can.Message:
+        """A ``can.Message`` for ``frame``; ``ValueError`` if a value is outside its range
+        (clamp forces first with :func:`clamp_force`)."""
+        frame_id, values = self._values(frame)
+        message = self._messages[frame_id]
+        values["Checksum"] = 0
+        try:
+            data = message.encode(values, scaling=True, strict=True)
+            values["Checksum"] = checksum(frame_id, data)
+            data = message.encode(values, scaling=True, strict=True)
+        except cantools.database.EncodeError as err:
+            raise ValueError(f"{message.name}: {err}") from None
+        return can.Message(
+            arbitration_id=frame_id,
+            is_extended_id=False,
+            dlc=FRAME_LENGTH,
+            data=data,
+            timestamp=timestamp,
+        )
+
+    @staticmethod
+    def _values(frame: Frame) -> tuple[int, dict[str, float]]:
+        if isinstance(frame, Sync):
+            return SYNC_ID, {"Tick": frame.tick % 2**32, "Counter": frame.counter}
+        node = frame.node
+        if not 1 <= node <= MAX_NODE:
+            raise ValueError(f"node id must be in 1..{MAX_NODE}, got {node!r}")
+        frame_id = _BASE_OF[type(frame)] + node
+        if isinstance(frame, Odometry):
+            vx, vy = frame.velocity
+            return frame_id, {"Vx": vx, "Vy": vy, "Counter": frame.counter}
+        if isinstance(frame, ForceCommand):
+            fx, fy = frame.force if frame.apply else (0.0, 0.0)
+            mode = 1 if frame.apply else 0
+            return frame_id, {"Fx": fx, "Fy": fy, "Mode": mode, "Counter": frame.counter}
+        if isinstance(frame, AppliedForce):
+            fx, fy = frame.force
+            return frame_id, {"Fx": fx, "Fy": fy, "Counter": frame.counter}
+        return frame_id, {"Mode": frame.mode, "Faults": frame.faults, "Counter": frame.counter}
+
+    # ------------------------------------------------------------------ decoding
+    def decode(self, msg: can.Message) -> Frame:
+        """The frame ``msg`` carries; :class:`FrameError` if it is not a valid one."""
+        if msg.is_error_frame:
+            raise FrameError("error frame", f"error frame (id 0x{msg.arbitration_id:x})")
+        if msg.is_remote_frame:
+            raise FrameError("remote frame", f"remote frame on id 0x{msg.arbitration_id:x}")
+        if msg.is_extended_id:
+            raise FrameError("extended id", f"extended id 0x{msg.arbitration_id:x}")
+        frame_id = msg.arbitration_id
+        message = self._messages.get(frame_id)
+        if message is None:
+            raise FrameError("unknown id", f"id 0x{frame_id:x}")
+        data = bytes(msg.data)
+        if msg.dlc != FRAME_LENGTH or len(data) != FRAME_LENGTH:
+            raise FrameError("wrong length", f"{message.name}: {len(data)} bytes, expected 8")
+        if data[7] != checksum(frame_id, data):
+            raise FrameError("checksum", f"{message.name}: checksum 0x{data[7]:02x}")
+        values = message.decode(data, decode_choices=False, scaling=True)
+        for signal in message.signals:
+            value = values[signal.name]
+            low, high = signal.minimum, signal.maximum
+            if (
+                not math.isfinite(value)
+                or (low is not None and value < low)
+                or (high is not None and value > high)
+            ):
+                raise FrameError("out of range", f"{message.name}.{signal.name} = {value!r}")
+            if signal.choices is not None and int(value) not in signal.choices:
+                raise FrameError("out of range", f"{message.name}.{signal.name} = {value!r}")
+        counter = int(values["Counter"])
+        if frame_id == SYNC_ID:
+            tick = int(values["Tick"])
+            if tick % COUNTER_MODULO != counter:
+                raise FrameError("out of range", f"Sync: counter {counter} for tick {tick}")
+            return Sync(tick)
+        base, node = frame_id & ~0x7F, frame_id & 0x7F
+        kind = _BASES[base]
+        if kind is Odometry:
+            return Odometry(node, counter, (values["Vx"], values["Vy"]))
+        if kind is ForceCommand:
+            apply = int(values["Mode"]) == 1
+            force = (values["Fx"], values["Fy"]) if apply else (0.0, 0.0)
+            return ForceCommand(node, counter, force, apply)
+        if kind is AppliedForce:
+            return AppliedForce(node, counter, (values["Fx"], values["Fy"]))
+        return Heartbeat(node, counter, int(values["Mode"]), int(values["Faults"]))
+
+    # ------------------------------------------------------------------ quantisation
+    def quantize_velocity(self, velocity: Vec2) -> Vec2:
+        """``velocity`` as a receiver decodes it from an :class:`Odometry` frame."""
+        return self.decode(self.encode(Odometry(1, 0, velocity))).velocity
+
+    def quantize_force(self, force: Vec2) -> Vec2:
+        """``force`` (within range) as a receiver decodes it from a force frame."""
+        return self.decode(self.encode(AppliedForce(1, 0, force))).force

@@ -1,0 +1,106 @@
+"""The AGV bridge's configuration: the robot's ``robot.toml`` with a ``[can]`` table.
+
+A robot computer runs its agent and its bridge from the same file, so the two cannot disagree
+on who the robot is, its team, its sensor period or where the Zenoh network is. The agent
+ignores ``[can]``; the bridge reads the rest as the agent does
+(:func:`agent.node.load_agent_config`'s checks) plus::
+
+    [can]
+    interface = "socketcan"    # python-can interface: socketcan on robots, virtual in tests
+    channel = "can0"           # the AGV's bus
+    bitrate = 1000000          # bit/s (set on the interface by the system, see deploy/)
+    node = 1                   # the AGV's node id in the CAN ids (default: the robot's id)
+    watchdog_ms = 100          # no valid command for this long: zero force
+    time_source = "sync"       # ticks from the bus's Sync frames ("clock": this host's clock)
+
+The bridge is a Zenoh client of the ``[zenoh]`` table's ``connect`` endpoints (the robot's
+router) and never listens itself: on a robot the agent's own listen endpoints stay the agent's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from agent.config import ConfigError, bounded, check_bounds, from_table, read_toml
+from agent.node import AgentNodeConfig
+from agent.zenoh_session import ZenohSettings
+from bridge.dbc import MAX_NODE
+
+TIME_SOURCES = ("sync", "clock")
+"""How the bridge gives each sample its tick (see :mod:`bridge.timing`)."""
+
+
+@dataclass(frozen=True)
+class CanSettings:
+    """The ``[can]`` table (see the module docstring)."""
+
+    interface: str = "socketcan"
+    """python-can interface name: ``socketcan`` on robots and in the HIL tests, ``virtual``
+    within one process."""
+    channel: str = "can0"
+    """The AGV's bus: ``can0`` on a robot, ``vcan1`` ... in tests."""
+    bitrate: int = bounded(1_000_000, 10_000, 1_000_000, "bit/s")
+    """The bus's bit rate. SocketCAN takes it from the interface (``ip link set can0 type can
+    bitrate …``, see deploy/); other interfaces are opened with it."""
+    node: int = bounded(0, 0, MAX_NODE)
+    """The AGV's node id in the frames' ids, 1..32; 0 (the default): the robot's id."""
+    watchdog_ms: int = bounded(100, 10, 10_000, "ms")
+    """No valid command from the agent for this long: the bridge commands zero force."""
+    time_source: str = "sync"
+    """``sync``: a sample's tick is the one the bus's last ``Sync`` frame opened (CANopen
+    SYNC); ``clock``: the tick this host's clock (synchronised by chrony or PTP) is in."""
+
+    def validate(self, where: str) -> None:
+        if not self.interface.isidentifier():
+            raise ConfigError(
+                f"{where}.interface: expected a python-can interface name like socketcan or"
+                f" virtual, got {self.interface!r}"
+            )
+        if not self.channel or not self.channel.isprintable() or " " in self.channel:
+            raise ConfigError(
+                f"{where}.channel: expected a channel name like can0, got {self.channel!r}"
+            )
+        if self.time_source not in TIME_SOURCES:
+            raise ConfigError(
+                f"{where}.time_source: expected sync or clock, got {self.time_source!r}"
+            )
+        check_bounds(self, where)
+
+
+@dataclass(frozen=True)
+class BridgeConfig:
+    """What ``heft bridge`` runs with: the robot's agent config and its ``[can]`` table."""
+
+    robot: AgentNodeConfig
+    can: CanSettings
+
+    @property
+    def node(self) -> int:
+        """The AGV's node id on the bus."""
+        return self.can.node or self.robot.robot
+
+    @property
+    def zenoh(self) -> ZenohSettings:
+        """The bridge's Zenoh session: a client of the robot's router (see the module
+        docstring)."""
+        return dataclasses.replace(self.robot.zenoh, mode="client", listen=())
+
+
+def load_bridge_config(path: str | Path) -> BridgeConfig:
+    """Read ``robot.toml`` for the bridge; :class:`ConfigError` (one line naming the key) if
+    it is bad or has no ``[can]`` table."""
+    data = read_toml(path)
+    table = data.pop("can", None)
+    try:
+        if table is None:
+            raise ConfigError("can: missing (the bridge needs a [can] table: interface, channel)")
+        can = from_table(CanSettings, table, "can")
+        robot = from_table(AgentNodeConfig, data, "agent")
+        config = BridgeConfig(robot, can)
+        if config.zenoh.mode == "client" and not config.zenoh.connect:
+            raise ConfigError("zenoh.connect: the bridge needs the robot's router endpoint")
+        return config
+    except ConfigError as err:
+        raise ConfigError(f"{path}: {err}") from None

@@ -1,0 +1,298 @@
+"""One robot's AGV bridge as a process: ``heft bridge --config robot.toml``.
+
+The I/O around a :class:`~bridge.bridge.Bridge`:
+
+- the AGV's bus, a python-can bus (``socketcan`` on robots and in the hardware-in-the-loop
+  tests, ``virtual`` in one process). A reader thread queues every frame with nothing else
+  done on it; the main thread decodes. If the bus fails (the interface went down or
+  disappeared, bus-off) the bridge logs it, closes the bus and reopens it every
+  :data:`REOPEN_S` until it is back, counting each reopening;
+- the robot's side of the robot-I/O seam over Zenoh
+  (:class:`~agent.zenoh_robot_io.ZenohAgentsPort` for this one robot): its agent's commands in,
+  its measurements out, exactly as the plant's, so an agent cannot tell a bridged robot from a
+  simulated one. The bridge declares its own liveliness token (``Keys.bridge_alive``) once the
+  bus is open, and publishes its :class:`~agent.protocol.BridgeStatus` every
+  :data:`STATUS_EVERY_S` and whenever its watchdog trips or clears.
+
+It runs until SIGINT, SIGTERM or SIGHUP, and then commands zero force before it leaves. The
+team's ``stop`` message ends a run, not the robot's link: the bridge commands zero force and
+keeps running.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import socket
+import threading
+import time
+from typing import NamedTuple
+
+import can
+
+from agent.process import RejectLog, stop_on_signals
+from agent.protocol import Command, Control, Keys
+from agent.robot_io import Event, Liveliness
+from agent.zenoh_robot_io import ZenohAgentsPort
+from agent.zenoh_session import open_session
+from bridge.bridge import Bridge
+from bridge.codec import COUNTER_MODULO, AgvCodec, ForceCommand
+from bridge.config import BridgeConfig, CanSettings
+from bridge.timing import ClockTicks, SyncTicks
+
+log = logging.getLogger("heft.bridge")
+STATUS_EVERY_S = 0.1
+REOPEN_S = 0.5
+MAX_WAIT_S = 0.05
+"""The longest the loop waits for something to arrive (it then checks the bus and the stop)."""
+RECEIVE_BUFFER = 4 << 20
+"""Bytes of socket receive buffer asked for (a burst at the bus's full rate waits there)."""
+GONE = (errno.ENODEV, errno.ENXIO, errno.ENETDOWN)
+
+
+class BusUnavailable(Exception):
+    """The bus cannot be opened; ``str()`` is one line naming it and why."""
+
+
+def open_bus(settings: CanSettings) -> can.BusABC:
+    """The python-can bus of ``settings``; :class:`BusUnavailable` if it cannot be opened."""
+    options = {}
+    if settings.interface not in ("socketcan", "virtual"):
+        options["bitrate"] = settings.bitrate  # SocketCAN's is the interface's (ip link)
+    try:
+        bus = can.Bus(interface=settings.interface, channel=settings.channel, **options)
+    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as err:
+        raise BusUnavailable(
+            f"CAN bus {settings.interface}/{settings.channel}: cannot open it"
+            f" ({type(err).__name__}: {err})"
+        ) from None
+    sock = getattr(bus, "socket", None)
+    if isinstance(sock, socket.socket):
+        for option in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+            if option is None:
+                continue
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, option, RECEIVE_BUFFER)
+                break
+            except OSError:
+                continue
+    return bus
+
+
+class _Received(NamedTuple):
+    message: can.Message
+
+
+class _BusFailed(NamedTuple):
+    error: Exception
+
+
+class BridgePort(ZenohAgentsPort):
+    """The robot's side over Zenoh for its one agent, whose event queue also carries what the
+    bus reader reads (``_Received``, ``_BusFailed``)."""
+
+    def _take(self, event, out: list[Event]) -> None:
+        if isinstance(event, tuple) and len(event) == 2 and isinstance(event[1], _CAN_EVENTS):
+            out.append(event)
+            return
+        super()._take(event, out)
+
+
+_CAN_EVENTS = (_Received, _BusFailed)
+
+
+class BridgeNode:
+    """The bridge's loop (see the module docstring) on ``port``; the bus is opened by it."""
+
+    def __init__(
+        self,
+        config: BridgeConfig,
+        port: BridgePort,
+        stop: threading.Event | None = None,
+        open_bus=open_bus,
+    ):
+        self.config = config
+        self.port = port
+        self.stop = stop or threading.Event()
+        self._open_bus = open_bus
+        robot = config.robot
+        ticks = SyncTicks() if config.can.time_source == "sync" else ClockTicks(robot.period_s)
+        self.bridge = Bridge(
+            robot=robot.robot,
+            node=config.node,
+            period_s=robot.period_s,
+            watchdog_s=config.can.watchdog_ms / 1000.0,
+            ticks=ticks,
+            rejects=port.rejects,
+            wall=time.time,
+            codec=AgvCodec(),
+        )
+        self.bus: can.BusABC | None = None
+        self._reader: threading.Thread | None = None
+        self._reader_stop = threading.Event()
+        self._next_reopen = 0.0
+        self._last_failure = ""
+
+    # ------------------------------------------------------------------ the bus
+    def open(self) -> None:
+        """Open the bus and start its reader (:class:`BusUnavailable` if it cannot)."""
+        self.bus = self._open_bus(self.config.can)
+        self._reader_stop = threading.Event()
+        self._reader = threading.Thread(
+            target=self._read, args=(self.bus, self._reader_stop), name="can-read", daemon=True
+        )
+        self._reader.start()
+
+    def _read(self, bus: can.BusABC, stop: threading.Event) -> None:
+        put = self.port.events.put
+        while not stop.is_set():
+            try:
+                message = bus.recv(timeout=0.1)
+            except (can.CanError, OSError, ValueError) as err:
+                if not stop.is_set():
+                    put((time.perf_counter(), _BusFailed(err)))
+                return
+            if message is not None:
+                put((time.perf_counter(), _Received(message)))
+
+    def _close_bus(self) -> None:
+        self._reader_stop.set()
+        if self._reader is not None:
+            self._reader.join(timeout=1.0)
+            self._reader = None
+        if self.bus is not None:
+            try:
+                self.bus.shutdown()
+            except (can.CanError, OSError):
+                pass
+            self.bus = None
+
+    def _bus_failed(self, error: Exception) -> None:
+        self.bridge.counts["bus errors"] += 1
+        log.error(
+            "robot %d: CAN bus %s failed (%s); reopening it every %.1f s",
+            self.config.robot.robot,
+            self.config.can.channel,
+            error,
+            REOPEN_S,
+        )
+        self._close_bus()
+        self._next_reopen = time.monotonic() + REOPEN_S
+
+    def _try_reopen(self) -> None:
+        if self.bus is not None or time.monotonic() < self._next_reopen:
+            return
+        try:
+            self.open()
+        except BusUnavailable as err:
+            if str(err) != self._last_failure:
+                log.warning("robot %d: %s; retrying", self.config.robot.robot, err)
+                self._last_failure = str(err)
+            self._next_reopen = time.monotonic() + REOPEN_S
+            return
+        self._last_failure = ""
+        self.bridge.counts["reopens"] += 1
+        log.info("robot %d: CAN bus %s is back", self.config.robot.robot, self.config.can.channel)
+
+    def _send(self, frames: list[can.Message]) -> None:
+        for frame in frames:
+            if self.bus is None:
+                self.bridge.counts["send failed"] += 1
+                continue
+            try:
+                self.bus.send(frame, timeout=0.01)
+                self.bridge.counts["frames out"] += 1
+            except (can.CanError, OSError) as err:
+                self.bridge.counts["send failed"] += 1
+                failed = self.bridge.counts["send failed"]
+                if failed <= 10 or failed % 1000 == 0:
+                    log.warning("robot %d: send failed #%d: %s", self.bridge.robot, failed, err)
+                code = getattr(err, "error_code", None) or getattr(err, "errno", None)
+                if code in GONE:
+                    self._bus_failed(err)
+
+    # ------------------------------------------------------------------ the loop
+    def _handle(self, item) -> None:
+        bridge = self.bridge
+        if isinstance(item, _Received):
+            for measurement in bridge.receive(item.message):
+                self.port.send(measurement)
+        elif isinstance(item, _BusFailed):
+            if self.bus is not None:
+                self._bus_failed(item.error)
+        elif isinstance(item, Command):
+            self._send(bridge.command(item, time.monotonic()))
+        elif isinstance(item, Control):
+            log.info("robot %d: the team was told to %s", bridge.robot, item.command)
+        elif isinstance(item, Liveliness) and item.who == "agent":
+            log.info("robot %d: agent %s", bridge.robot, "up" if item.alive else "gone")
+
+    def run(self) -> int:
+        """Until stopped; 0."""
+        config, bridge = self.config, self.bridge
+        if self.bus is None:
+            self.open()
+        source = "the bus's Sync frames" if config.can.time_source == "sync" else "this clock"
+        log.info(
+            "bridge of robot %d up: node %d on %s/%s, watchdog %d ms, ticks from %s",
+            bridge.robot,
+            bridge.node,
+            config.can.interface,
+            config.can.channel,
+            config.can.watchdog_ms,
+            source,
+        )
+        next_status = time.monotonic()
+        tripped = bridge.tripped
+        try:
+            while not self.stop.is_set():
+                now = time.monotonic()
+                wait = min(bridge.next_check(now), next_status, now + MAX_WAIT_S) - now
+                for _, item in self.port.poll(max(wait, 0.0)):
+                    self._handle(item)
+                now = time.monotonic()
+                self._send(bridge.watchdog(now))
+                self._try_reopen()
+                if now >= next_status or bridge.tripped != tripped:
+                    tripped = bridge.tripped
+                    self.port.report(bridge.status())
+                    next_status = now + STATUS_EVERY_S
+        finally:
+            self._leave()
+        return 0
+
+    def _leave(self) -> None:
+        """Zero force, the last status, the counters in the log; the bus closed."""
+        bridge = self.bridge
+        if self.bus is not None:
+            latest = bridge.ticks.latest(time.time()) or 0
+            zero = ForceCommand(bridge.node, latest % COUNTER_MODULO, (0.0, 0.0), apply=False)
+            self._send([bridge.codec.encode(zero)])
+        self.port.report(bridge.status())
+        self._close_bus()
+        counts = dict(sorted(bridge.counts.items()))
+        rejected = {f"{what}/{why}": n for (what, why), n in sorted(bridge.rejects.reasons.items())}
+        log.info("bridge of robot %d stops: %s", bridge.robot, counts)
+        if rejected:
+            log.info("bridge of robot %d rejected: %s", bridge.robot, rejected)
+
+
+def run_bridge(config: BridgeConfig, stop: threading.Event | None = None) -> int:
+    """Run the bridge of ``config`` until stopped (SIGINT, SIGTERM or SIGHUP);
+    :class:`BusUnavailable` if its bus cannot be opened at the start."""
+    stop = stop or stop_on_signals()
+    robot = config.robot.robot
+    rejects = RejectLog(log, f"bridge {robot}")
+    with open_session(config.zenoh) as session:
+        port = BridgePort(session, Keys(config.robot.team), [robot], rejects)
+        node = BridgeNode(config, port, stop)
+        token = None
+        try:
+            node.open()
+            token = session.liveliness().declare_token(Keys(config.robot.team).bridge_alive(robot))
+            return node.run()
+        finally:
+            if token is not None:
+                token.undeclare()
+            node._close_bus()
+            port.close()
