@@ -14,15 +14,28 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
-    """An event set by SIGINT, SIGTERM or SIGHUP. Call it from the main thread before any
-    other thread starts (before the Zenoh session opens, before a bus reader starts).
+    """An event set by SIGINT, SIGTERM or SIGHUP (call from the main thread).
 
-    No Python signal handler is involved: the signals are blocked in the calling thread, so
-    every thread started afterwards (Python's and the libraries' native ones) inherits the
-    mask, and one thread of its own takes them with ``sigwait`` and sets the event. A Python
-    handler runs in the main thread between two bytecodes, whatever that thread holds at the
-    time; measured in a bridge process on User-Mode Linux, SIGTERM then left it stuck in a
-    0.01 s wait for good, about 2 times in 3."""
+    The handler runs in the main thread between two bytecodes, possibly while that thread holds
+    the event's own lock (inside ``wait`` or ``set``); setting the event from the handler could
+    then deadlock, so it is set from a short-lived thread instead."""
+    stop = stop or threading.Event()
+
+    def handler(*_: object) -> None:
+        threading.Thread(target=stop.set, name="stop-signal", daemon=True).start()
+
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, handler)
+    return stop
+
+
+def stop_on_signals_taken(stop: threading.Event | None = None) -> threading.Event:
+    """An event set by SIGINT, SIGTERM or SIGHUP, with no Python signal handler: the signals
+    are blocked in the calling thread (call it from the main thread before any other thread
+    starts, so that every thread inherits the mask) and one thread of its own takes them with
+    ``sigwait``. The AGV bridge uses it: measured in a bridge under User-Mode Linux, the
+    handler of :func:`stop_on_signals` left the process stuck in a 0.01 s queue wait after
+    SIGTERM about 2 times in 3."""
     stop = stop or threading.Event()
     signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 

@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import can
 
-from agent.process import RejectLog, stop_on_signals
+from agent.process import RejectLog, stop_on_signals_taken
 from agent.protocol import Command, Control, Keys
 from agent.robot_io import Event, Liveliness
 from agent.zenoh_robot_io import ZenohAgentsPort
@@ -280,7 +280,7 @@ class BridgeNode:
 def run_bridge(config: BridgeConfig, stop: threading.Event | None = None) -> int:
     """Run the bridge of ``config`` until stopped (SIGINT, SIGTERM or SIGHUP);
     :class:`BusUnavailable` if its bus cannot be opened at the start."""
-    stop = stop or stop_on_signals()
+    stop = stop or stop_on_signals_taken()
     robot = config.robot.robot
     rejects = RejectLog(log, f"bridge {robot}")
     with open_session(config.zenoh) as session:

@@ -94,8 +94,9 @@ DEATH_SIGNAL = signal.SIGKILL
 
 Not SIGTERM, measured: the kernel sends the parent-death signal again each time the child is
 handed to another of the dying launcher's threads, so a child gets a burst of them; the
-processes' handlers were not re-entrant and deadlocked when one arrived while another ran
-(about 1 launcher kill in 25 left an agent or the plant behind). The
+processes' handler (``agent.process.stop_on_signals``: ``Event.set`` in a signal handler) is
+not re-entrant and deadlocks when one arrives while it runs (about 1 launcher kill in 25 left
+an agent or the plant behind), and ``heft router`` sometimes never wakes from its wait. The
 launcher is gone and nothing is recorded: there is nothing for a child to save."""
 HALT_GRACE_S = 0.5
 AGENT_GONE_S = 3.0
