@@ -156,10 +156,19 @@ class AgvCodec:
 
     # ------------------------------------------------------------------ encoding
     def encode(self, frame: Frame, timestamp: float = 0.0) -> can.Message:
-        """A ``can.Message`` for ``frame``; ``ValueError`` if a value is outside its range
-        (clamp forces first with :func:`clamp_force`)."""
+        """A ``can.Message`` for ``frame``; ``ValueError`` if a value is not finite, outside
+        its range or not one of its signal's choices (clamp forces first with
+        :func:`clamp_force`)."""
         frame_id, values = self._values(frame)
         message = self._messages[frame_id]
+        for name, value in values.items():
+            if not math.isfinite(value):
+                raise ValueError(f"{message.name}: {name} is {value!r}, not a finite number")
+            choices = message.get_signal_by_name(name).choices
+            if choices is not None and value not in choices:
+                raise ValueError(
+                    f"{message.name}: {name} is {value!r}, not one of {sorted(choices)}"
+                )
         values["Checksum"] = 0
         try:
             data = message.encode(values, scaling=True, strict=True)

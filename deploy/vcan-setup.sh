@@ -19,8 +19,13 @@ fi
 for ((i = 0; i < count; i++)); do
   name="vcan$i"
   if [ "$delete" -eq 1 ]; then
-    ip link show "$name" >/dev/null 2>&1 && ip link delete "$name" && echo "deleted $name"
+    if ip link show "$name" >/dev/null 2>&1; then
+      ip link delete "$name" || { echo "vcan-setup: cannot delete $name" >&2; exit 1; }
+      echo "deleted $name"
+    fi
   elif ! ip link show "$name" >/dev/null 2>&1; then
-    ip link add dev "$name" type vcan && ip link set "$name" up && echo "created $name"
+    ip link add dev "$name" type vcan || { echo "vcan-setup: cannot create $name" >&2; exit 1; }
+    ip link set "$name" up || { echo "vcan-setup: cannot bring $name up" >&2; exit 1; }
+    echo "created $name"
   fi
 done

@@ -329,6 +329,8 @@ class Collector:
         self.latest_tick = 0
         self._finished = False
         self.first_truth_at: float | None = None
+        self.advanced_at: float | None = None
+        """When the first truth, or one of a newer tick than any before, arrived."""
         self.halted_at = 0.0
         self.finished_at: float | None = None
         self._subscribers = [
@@ -371,8 +373,11 @@ class Collector:
         elif isinstance(message, Status):
             self._status(message)
         elif isinstance(message, Truth):
+            now = time.perf_counter()
             if self.first_truth_at is None:
-                self.first_truth_at = time.perf_counter()
+                self.first_truth_at = now
+            if self.advanced_at is None or message.tick > self.latest_tick:
+                self.advanced_at = now
             self.latest_tick = max(self.latest_tick, message.tick)
             self.truths[message.tick] = message
             self._complete(message.tick)
@@ -688,8 +693,6 @@ class _Watch:
         self.gone: dict[int, tuple[float, int, str]] = {}
         """Robots whose agent (or bridge) process exited mid-run: when, its exit code, and
         which (``agent``, ``bridge``)."""
-        self.tick_seen = -1
-        self.tick_seen_at = time.perf_counter()
 
     def _t(self) -> str:
         return f"t = {self.collector.latest_tick * self.scenario.period_s:.2f} s simulated"
@@ -796,10 +799,8 @@ class _Watch:
         return Verdict(PLANT_LOST, f"the plant process ended ({how}) at {self._t()}")
 
     def _stalled(self) -> Verdict | None:
-        now = time.perf_counter()
-        if self.collector.latest_tick != self.tick_seen:
-            self.tick_seen, self.tick_seen_at = self.collector.latest_tick, now
-        elif self.collector.first_truth_at is not None and now - self.tick_seen_at > STALL_S:
+        advanced_at = self.collector.advanced_at
+        if advanced_at is not None and time.perf_counter() - advanced_at > STALL_S:
             return Verdict(
                 STALLED,
                 f"no new truth from the plant for {STALL_S:g} s after {self._t()}: the plant,"

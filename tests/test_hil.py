@@ -84,11 +84,13 @@ def test_lockstep_over_can_reproduces_the_inprocess_can_run(tmp_path: Path) -> N
     log = tmp_path / "vcan1.log"
     dump = Candump("vcan1", log)
     started = time.perf_counter()
+    output = io.StringIO()
     try:
-        there = run_zenoh(scenario, can=CanLink(), log_stream=io.StringIO())
+        there = run_zenoh(scenario, can=CanLink(), log_stream=output)
     finally:
         dump.close()
     wall = time.perf_counter() - started
+    assert there.converged, f"{there.verdict}; the run's log ends:\n{output.getvalue()[-8000:]}"
     worst = worst_errors(there)
     bridges = there.transport["bridges"]
     print(

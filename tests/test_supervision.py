@@ -21,7 +21,15 @@ import pytest
 from agent.dispatch import main
 from simulator import launcher
 from simulator.scenario import load_scenario
-from tests.conftest import PAPER, agent_pid, child_pid, children_of, in_session, launch
+from tests.conftest import (
+    PAPER,
+    agent_pid,
+    child_pid,
+    children_of,
+    in_session,
+    launch,
+    worst_errors,
+)
 
 pytestmark = pytest.mark.slow  # Zenoh sessions and processes
 
@@ -285,3 +293,20 @@ def test_a_hung_plant_is_named_stalled(monkeypatch) -> None:
     assert outcome.reason == "stalled" and not outcome.converged
     assert "no new truth from the plant for 2 s" in outcome.detail
     assert children_of(os.getpid()) == []  # SIGCONT, then SIGTERM: a stopped plant goes too
+
+
+def test_a_slow_start_is_not_a_stall(monkeypatch) -> None:
+    """The stall clock starts with the plant's first truth: a start that takes longer than
+    ``STALL_S`` (a loaded machine importing) is not a hung plant."""
+    monkeypatch.setattr(launcher, "STALL_S", 2.0)
+
+    def hold_the_plant() -> None:
+        plant = _child(" sim ")
+        os.kill(plant, signal.SIGSTOP)  # before its first tick: the team waits for it
+        time.sleep(3.0)
+        os.kill(plant, signal.SIGCONT)
+
+    threading.Thread(target=hold_the_plant, daemon=True).start()
+    outcome = launcher.run_zenoh(load_scenario(PAPER), log_stream=io.StringIO())
+    assert outcome.converged, outcome.detail
+    assert worst_errors(outcome)["mass"] < 1e-4
