@@ -43,10 +43,19 @@ class UsageError(Exception):
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
-    """Keeps the descriptions' line breaks; a little wider help column."""
+    """Keeps the descriptions' line breaks; a little wider help column; room for every
+    subcommand's name on its line (``heft --help``)."""
 
     def __init__(self, prog: str) -> None:
         super().__init__(prog, max_help_position=30)
+
+    def add_argument(self, action: argparse.Action) -> None:
+        super().add_argument(action)
+        if action.help is not argparse.SUPPRESS:
+            # argparse sizes the column without the extra indentation subcommands get
+            for subaction in self._iter_indented_subactions(action):
+                length = len(self._format_action_invocation(subaction)) + self._current_indent
+                self._action_max_length = max(self._action_max_length, length)
 
 
 # ------------------------------------------------------------------------------ output files

@@ -105,8 +105,16 @@ def coerce(value: Any, tp: Any, key: str) -> Any:
 
 
 @functools.cache
+@functools.cache
 def _hints(cls: type) -> dict[str, Any]:
+    """``cls``'s resolved annotations (resolving them is most of a small table's cost, and
+    every decoded protocol message is one: once per class)."""
     return typing.get_type_hints(cls)
+
+
+@functools.cache
+def _fields(cls: type) -> dict[str, dataclasses.Field]:
+    return {f.name: f for f in dataclasses.fields(cls)}
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -125,7 +133,7 @@ def from_table(cls: type[T], table: Any, where: str) -> T:
     if not isinstance(table, dict):
         raise ConfigError(f"{where}: expected a table, got {table!r}")
     hints = _hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    fields = _fields(cls)
     unknown = sorted(set(table) - set(fields))
     if unknown:
         raise ConfigError(

@@ -53,6 +53,7 @@ from agent.config import (
 from agent.faults import FaultSettings, FaultyTransport
 from agent.process import RejectLog, stop_on_signals
 from agent.protocol import CLOCKS, Command, Control, Keys, Measurement, Phase, Share, Status
+from agent.resend import ResendTimeout
 from agent.robot_io import Liveliness, RobotPort
 from agent.zenoh_robot_io import ZenohRobotPort
 from agent.zenoh_session import ZenohSettings, open_session
@@ -63,8 +64,10 @@ TICK_WINDOW = 500
 """A measurement stamped more than this many ticks ahead of the agent's clock is rejected. In
 lockstep the clock starts at 0 (the plant's first tick); in real time at the first of two
 consecutive samples (a robot's ticks count from its own synchronised clock)."""
-RESEND_AFTER_S = 0.2
-"""An agent idle this long sends its latest share again (lockstep tolerates lost messages)."""
+SLOW_TICK_S = 2.0
+"""Lockstep: a tick that waits this long for its neighbours' shares is logged (once)."""
+IDLE_WAIT_S = 0.2
+"""The longest the loop waits for something to arrive before it looks at its stop."""
 
 
 @dataclass(frozen=True)
@@ -174,6 +177,12 @@ class AgentNode:
         self.last_command: Command | None = None
         self.recent_shares: deque[Share] = deque(maxlen=2)
         self.last_sent = time.monotonic()
+        self.resend = ResendTimeout()
+        """After how long idle the latest shares go again: the time a tick takes, adapted."""
+        self.resent = False
+        """Whether the shares went again since the last step (that interval is no sample)."""
+        self.told = -1
+        """The last tick whose long wait was logged."""
 
     # ------------------------------------------------------------------ events
     def _handle(self, item) -> None:
@@ -226,16 +235,39 @@ class AgentNode:
                 return False
         return True
 
+    def _tell_a_long_wait(self) -> None:
+        """Lockstep: log once a tick whose measurement waits :data:`SLOW_TICK_S` for shares."""
+        k = self.next_tick
+        if self.config.clock != "lockstep" or k not in self.measurements or k == self.told:
+            return
+        if time.monotonic() - self.last_sent < SLOW_TICK_S:
+            return
+        self.told = k
+        missing = [
+            j for j in self.config.neighbours if j not in self.lost and (j, k - 1) not in self.have
+        ]
+        log.warning(
+            "robot %d: tick %d waits %.1f s for the shares of tick %d from robot(s) %s",
+            self.robot,
+            k,
+            time.monotonic() - self.last_sent,
+            k - 1,
+            missing,
+        )
+
     def _step(self, k: int) -> None:
         agent = self.agent
         measurement = self.measurements.pop(k)
         command, share = agent.step(measurement, self.shares)
         self.shares = []
-        self.last_command = command
         self.port.send(command)
         self.transport.send(share)
         self.recent_shares.append(share)
-        self.last_sent = time.monotonic()
+        now = time.monotonic()
+        if self.last_command is not None and not self.resent:
+            self.resend.observe(now - self.last_sent)
+        self.last_sent, self.resent = now, False
+        self.last_command = command
         if k % self.config.report_every == 0 or agent.phase >= Phase.DONE:
             self.port.report(agent.estimates())
         if agent.phase != self.last_phase or k % 100 == 0:
@@ -265,6 +297,9 @@ class AgentNode:
     def pump(self, timeout: float) -> None:
         """Wait up to ``timeout`` for events, then step every tick that can be stepped."""
         due = self.transport.next_release()
+        if self.recent_shares:
+            resend = self.last_sent + self.resend.timeout_s
+            due = resend if due is None else min(due, resend)
         if due is not None:
             timeout = max(0.0, min(timeout, due - time.monotonic()))
         for _, item in self.port.poll(timeout):
@@ -285,12 +320,13 @@ class AgentNode:
         while self._can_step(self.next_tick):
             self._step(self.next_tick)
             self._collect_shares()
-        if self.recent_shares and time.monotonic() - self.last_sent > RESEND_AFTER_S:
+        self._tell_a_long_wait()
+        if self.recent_shares and time.monotonic() - self.last_sent > self.resend.timeout_s:
             # Idle: a neighbour may be waiting for a share the network lost. Say it again. In
             # lockstep a neighbour is at most one tick behind: it may need the one before too.
             for share in self.recent_shares:
                 self.transport.send(share)
-            self.last_sent = time.monotonic()
+            self.last_sent, self.resent = time.monotonic(), True
 
     def run(self) -> int:
         """Run until told to stop; returns the process exit status."""
@@ -302,7 +338,7 @@ class AgentNode:
             self.config.clock,
         )
         while not self.stop.is_set():
-            self.pump(0.05)
+            self.pump(IDLE_WAIT_S)
         self.port.report(self.status(self.next_tick - 1))
         return 3 if self.agent.phase == Phase.HALTED else 0
 

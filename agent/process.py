@@ -47,6 +47,19 @@ def stop_on_signals_taken(stop: threading.Event | None = None) -> threading.Even
     return stop
 
 
+def in_user_mode_linux(cpuinfo: str | None = None) -> bool:
+    """Whether this kernel is User-Mode Linux (its ``/proc/cpuinfo``, or ``cpuinfo``, says so):
+    one CPU for every process, and every system call about 100 µs (``heft vcan`` runs there
+    where the machine's kernel has no SocketCAN)."""
+    if cpuinfo is None:
+        try:
+            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as file:
+                cpuinfo = file.read()
+        except OSError:
+            return False
+    return "User Mode Linux" in cpuinfo
+
+
 class RejectLog:
     """Counts rejected messages by what they were (e.g. ``"measurement"``) and why (e.g.
     ``"undecodable"``, ``"tick out of window"``), and logs them without flooding the log: the
@@ -88,10 +101,13 @@ class EventQueue:
         self._queue.put(event)
 
     def drain(self, handle, timeout: float | None) -> None:
-        """Wait up to ``timeout`` s for an event, then ``handle`` it and every other queued."""
+        """Wait up to ``timeout`` s for an event, then ``handle`` it and the others queued by
+        then; not those that arrive meanwhile, so that a flood (a bus at its full rate, a
+        machine too slow to keep up) never keeps the caller from its own duties (a watchdog,
+        a tick) for longer than one batch."""
         try:
             handle(self._queue.get(timeout=timeout))
-            while True:
+            for _ in range(self._queue.qsize()):
                 handle(self._queue.get_nowait())
         except queue.Empty:
             pass

@@ -14,8 +14,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from agent.config import ConfigError, bounded, check_bounds
+from agent.process import in_user_mode_linux
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+LEASE_MS = 2000
+"""How soon the others notice that a process hung, by default: 2 s."""
+EMULATED_LEASE_MS = 10_000
+"""The default lease in User-Mode Linux (:func:`~agent.process.in_user_mode_linux`). There
+the guest's one CPU serves every process of a run, each system call costs about 100 µs, and
+keep-alives wait: with a 2 s lease the sessions of a CAN run (router, plant, four bridges,
+four agents) expired and reconnected every few seconds, and the team halted; with 10 s it
+ran through."""
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:/\s]+:\d{1,5}$")
 
 
@@ -30,8 +39,11 @@ class ZenohSettings:
     ``tls``), port 1 to 65535; a client needs at least one."""
     listen: tuple[str, ...] = ()
     """Endpoints to listen on, as ``connect``; a router needs at least one."""
-    lease_ms: int = bounded(2000, 100, 60_000, "ms")
-    """How soon the others notice this process hung (``transport/link/tx/lease``)."""
+    lease_ms: int = bounded(
+        EMULATED_LEASE_MS if in_user_mode_linux() else LEASE_MS, 100, 60_000, "ms"
+    )
+    """How soon the others notice this process hung (``transport/link/tx/lease``): 2 s,
+    10 s in User-Mode Linux (see :data:`EMULATED_LEASE_MS`)."""
     connect_timeout_ms: int = bounded(15000, 0, 600_000, "ms")
     """How long a client waits for its router at start-up (0: it tries once); then
     :func:`open_session` fails with one line naming the endpoints."""

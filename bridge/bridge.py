@@ -16,9 +16,10 @@ the Zenoh session:
   the DBC's ±500 N per axis (clamps counted), ``Counter = k mod 16``. A command for a tick the
   bus has not opened, or more than 15 ticks old (its counter would name another tick), is
   refused and counted.
-- :meth:`Bridge.watchdog`, called at least once a period: once armed by a first command, if no
-  valid command came for ``watchdog_s`` the bridge commands zero force (``ForceCommand``
-  in mode ZERO) every period until commands return; each trip is logged and counted, and
+- :meth:`Bridge.watchdog`, called after every frame and at :meth:`Bridge.next_check`: once
+  armed by a first command, if no valid command came for ``watchdog_s`` the bridge commands
+  zero force (``ForceCommand`` in mode ZERO) on every tick the bus opens, and every
+  ``watchdog_s`` without one, until commands return; each trip is logged and counted, and
   :meth:`Bridge.status` says so.
 
 Sequence: every frame's 4-bit ``Counter`` goes up by one per frame of its kind. A counter that
@@ -112,6 +113,8 @@ class Bridge:
         self._last_sync: int | None = None
         self._last_command_at: float | None = None
         self._last_zero_at = -math.inf
+        self._zero_tick: int | None = None
+        """The tick of the last ZERO frame."""
 
     # ------------------------------------------------------------------ the bus → the agent
     def receive(self, message: can.Message) -> list[Measurement]:
@@ -222,10 +225,13 @@ class Bridge:
         return [frame]
 
     def watchdog(self, at: float) -> list[can.Message]:
-        """Zero force (mode ZERO) if the agent fell silent for ``watchdog_s``; at most one
-        frame per period."""
+        """Zero force (mode ZERO) if the agent fell silent for ``watchdog_s``: a frame when it
+        trips, then one for each tick the bus opens (at most one a period) and, with no new
+        tick, one every ``watchdog_s``: a frame a period on a bus that ticks in real time,
+        and no flood where ticks come slower (a lockstep simulation, a stopped bus master)."""
         if self._last_command_at is None or at - self._last_command_at <= self.watchdog_s:
             return []
+        latest = self.ticks.latest(self.wall()) or 0
         if not self.tripped:
             self.tripped = True
             self.counts["watchdog trips"] += 1
@@ -238,8 +244,9 @@ class Bridge:
             )
         elif at - self._last_zero_at < self.period_s:
             return []
-        self._last_zero_at = at
-        latest = self.ticks.latest(self.wall()) or 0
+        elif latest == self._zero_tick and at - self._last_zero_at < self.watchdog_s:
+            return []
+        self._last_zero_at, self._zero_tick = at, latest
         self.counts["zero frames"] += 1
         frame = ForceCommand(self.node, latest % COUNTER_MODULO, (0.0, 0.0), apply=False)
         return [self.codec.encode(frame)]
@@ -248,8 +255,8 @@ class Bridge:
         """When :meth:`watchdog` has something to do next (a time like ``at``)."""
         if self._last_command_at is None:
             return at + self.period_s
-        if self.tripped:
-            return max(at, self._last_zero_at + self.period_s)
+        if self.tripped:  # a new tick is a frame, and the loop checks after every frame
+            return max(at, self._last_zero_at + self.watchdog_s)
         return max(at, self._last_command_at + self.watchdog_s + 1e-4)
 
     # ------------------------------------------------------------------ health

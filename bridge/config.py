@@ -12,6 +12,7 @@ ignores ``[can]``; the bridge reads the rest as the agent does
     node = 1                   # the AGV's node id in the CAN ids (default: the robot's id)
     watchdog_ms = 100          # no valid command for this long: zero force
     time_source = "sync"       # ticks from the bus's Sync frames ("clock": this host's clock)
+    realtime_priority = 0      # 1..99: run under SCHED_FIFO at this priority (0: do not)
 
 The bridge is a Zenoh client of the ``[zenoh]`` table's ``connect`` endpoints (the robot's
 router) and never listens itself: on a robot the agent's own listen endpoints stay the agent's.
@@ -51,6 +52,12 @@ class CanSettings:
     time_source: str = "sync"
     """``sync``: a sample's tick is the one the bus's last ``Sync`` frame opened (CANopen
     SYNC); ``clock``: the tick this host's clock (synchronised by chrony or PTP) is in."""
+
+    realtime_priority: int = bounded(0, 0, 99)
+    """1 to 99: the bridge runs under the kernel's real-time scheduler (``SCHED_FIFO``) at
+    this priority, so that its watchdog and its frames keep their timing on a loaded
+    computer; it needs the right (root, ``CAP_SYS_NICE``, or systemd's
+    ``CPUSchedulingPolicy=fifo`` instead). 0 (the default): the normal scheduler."""
 
     def validate(self, where: str) -> None:
         if not self.interface.isidentifier():

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import os
 import socket
 import threading
 import time
@@ -41,10 +42,14 @@ from bridge.config import BridgeConfig, CanSettings
 from bridge.timing import ClockTicks, SyncTicks
 
 log = logging.getLogger("heft.bridge")
-STATUS_EVERY_S = 0.1
+STATUS_EVERY_S = 0.25
+"""How often the bridge publishes its status when nothing changes (a watchdog that trips or
+clears is published at once)."""
 REOPEN_S = 0.5
-MAX_WAIT_S = 0.05
+MAX_WAIT_S = 0.2
 """The longest the loop waits for something to arrive (it then checks the bus and the stop)."""
+READ_WAIT_S = 0.5
+"""The longest the bus reader waits for a frame before it looks at its stop."""
 RECEIVE_BUFFER = 4 << 20
 """Bytes of socket receive buffer asked for (a burst at the bus's full rate waits there)."""
 GONE = (errno.ENODEV, errno.ENXIO, errno.ENETDOWN)
@@ -147,7 +152,7 @@ class BridgeNode:
         put = self.port.events.put
         while not stop.is_set():
             try:
-                message = bus.recv(timeout=0.1)
+                message = bus.recv(timeout=READ_WAIT_S)
             except (can.CanError, OSError, ValueError) as err:
                 if not stop.is_set():
                     put((time.perf_counter(), _BusFailed(err)))
@@ -277,9 +282,27 @@ class BridgeNode:
             log.info("bridge of robot %d rejected: %s", bridge.robot, rejected)
 
 
+def use_realtime_priority(priority: int) -> None:
+    """Put this process's calling thread, and every thread it starts from now on, under
+    ``SCHED_FIFO`` at ``priority`` (see :attr:`CanSettings.realtime_priority`); a warning,
+    not a failure, if the system refuses."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as err:
+        log.warning(
+            "realtime_priority %d: the system refused SCHED_FIFO (%s); running without it",
+            priority,
+            getattr(err, "strerror", None) or err,
+        )
+        return
+    log.info("real-time scheduling: SCHED_FIFO at priority %d", priority)
+
+
 def run_bridge(config: BridgeConfig, stop: threading.Event | None = None) -> int:
     """Run the bridge of ``config`` until stopped (SIGINT, SIGTERM or SIGHUP);
     :class:`BusUnavailable` if its bus cannot be opened at the start."""
+    if config.can.realtime_priority:  # before any thread starts: they all inherit it
+        use_realtime_priority(config.can.realtime_priority)
     stop = stop or stop_on_signals_taken()
     robot = config.robot.robot
     rejects = RejectLog(log, f"bridge {robot}")

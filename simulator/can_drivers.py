@@ -69,6 +69,8 @@ DEFAULT_CHANNEL = "vcan{robot}"
 HEARTBEAT_PERIOD_S = HEARTBEAT_PERIOD_MS / 1000.0
 READY = next(code for code, name in DRIVER_MODES.items() if name == "READY")
 ACTIVE = next(code for code, name in DRIVER_MODES.items() if name == "ACTIVE")
+READ_WAIT_S = 0.5
+"""The longest a bus reader waits for a frame before it looks at whether the port closes."""
 PARTIES = ("agent", "bridge")
 """Whose liveliness makes a robot up in a CAN run."""
 
@@ -334,7 +336,7 @@ class CanDriversPort(AgentsPort):
         put = self.events.put
         while not self._closing.is_set():
             try:
-                message = lane.bus.recv(timeout=0.1)
+                message = lane.bus.recv(timeout=READ_WAIT_S)
             except (can.CanError, OSError, ValueError) as err:
                 if self._closing.is_set():
                     return

@@ -114,12 +114,14 @@ def cmd_run(args: argparse.Namespace) -> int:
             check_writable(out)  # never creates the file: it appears, whole, at the end
         if args.plot is not None:
             check_writable(Path(args.plot), directory=True)
+        companion = _companion(args, scenario)  # the dashboard's URL is printed before the run
         started = time.perf_counter()
         if not args.quiet:
             print(f"{PROG}: running {scenario.name!r} ({scenario.n} robots)", file=sys.stderr)
         outcome: RunOutcome | None = None
         try:
-            outcome = _run(args, scenario, faults, started, stop, link)
+            on_ready = None if companion is None else companion.on_ready
+            outcome = _run(args, scenario, faults, started, stop, link, on_ready)
             reason, detail = outcome.reason, outcome.detail
             rejections = outcome.transport.get("rejections")
         except _NothingRecorded as failed:
@@ -147,7 +149,54 @@ def cmd_run(args: argparse.Namespace) -> int:
                         print(f"wrote plot {path}")
             except KeyboardInterrupt:
                 reason, detail = INTERRUPTED, f"plots cut short by {stop.received}"
+        if companion is not None:
+            _after_the_run(args, companion, stop.event)
     return _say_verdict(reason, detail, out, recorded=outcome is not None)
+
+
+def _companion(args: argparse.Namespace, scenario: Scenario):
+    """The run's recording (over Zenoh, unless ``--no-record``) and, for ``heft demo``, its
+    dashboard, served from now on; None when there is neither."""
+    dashboard = getattr(args, "dashboard", False)
+    record = None
+    if args.transport == "zenoh" and not args.no_record:
+        from dashboard.companion import default_recording
+
+        record = Path(args.record) if args.record else default_recording(scenario.name)
+        check_writable(record)
+    elif args.record is not None:
+        raise UsageError("--record needs --transport zenoh (a run in one process sends nothing)")
+    if record is None and not dashboard:
+        return None
+    from agent.zenoh_session import SessionError
+    from dashboard.companion import RunCompanion
+    from dashboard.server import ServeError
+
+    try:
+        return RunCompanion.open(
+            scenario, record, dashboard, port=args.dashboard_port, stream=sys.stdout
+        )
+    except ServeError as err:  # a busy port: exit status 4, as an unreachable router
+        raise SessionError(str(err)) from None
+
+
+def _after_the_run(args: argparse.Namespace, companion, stop: threading.Event) -> None:
+    """Close the recording; ``heft demo`` then keeps its dashboard up until Ctrl-C (unless
+    ``--no-wait``, or the run itself was interrupted)."""
+    try:
+        companion.run_over()
+        if companion.record is not None:
+            print(f"recorded the run to {companion.record}")
+        if companion.display is not None and not args.no_wait and not stop.is_set():
+            print(
+                f"{PROG}: the dashboard stays at {companion.display.url} (replay the run"
+                " there); Ctrl-C to stop",
+                file=sys.stderr,
+                flush=True,
+            )
+            companion.serve_until(stop)
+    finally:
+        companion.close()
 
 
 def _say_verdict(reason: str, detail: str, out: Path | None, recorded: bool) -> int:
@@ -187,12 +236,13 @@ def _run(
     started: float,
     stop: _StopSignals,
     link: CanLink | None = None,
+    on_ready=None,
 ) -> RunOutcome:
     """The run of ``heft run``, in one process or over Zenoh (with ``link``, the robots on
     CAN behind their bridges); :class:`_NothingRecorded` when it recorded nothing. In one
     process ``link`` quantises as CAN does."""
     if args.transport == "zenoh":
-        return _run_zenoh(args, scenario, faults, stop.event, link)
+        return _run_zenoh(args, scenario, faults, stop.event, link, on_ready)
     from simulator.inprocess import run_inprocess
 
     progress = None if args.quiet else _progress_printer(started, sys.stderr)
@@ -277,6 +327,7 @@ def _run_zenoh(
     faults: FaultSettings,
     stop: threading.Event,
     link: CanLink | None = None,
+    on_ready=None,
 ) -> RunOutcome:
     """The run over Zenoh (:func:`simulator.launcher.run_zenoh`), with ``link`` over CAN
     too; it stops once ``stop`` is set. :class:`_NothingRecorded` when it recorded nothing."""
@@ -300,6 +351,7 @@ def _run_zenoh(
             log_stream=stream,
             stop=stop,
             can=link,
+            on_ready=on_ready,
         )
     except RunFailed as failed:
         rejections = failed.transport.get("rejections")
@@ -331,6 +383,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     args.clock = "realtime"
     args.drop = 0.0
     args.delay_ms = 0.0
+    args.dashboard = True
     return cmd_run(args)
 
 
@@ -356,6 +409,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from agent.config import Bound
     from simulator.benchmark import DEFAULT_REPEAT, PAPER_SCENARIO, format_report, run_benchmark
 
+    if args.can:
+        return _bench_can(args)
+    for option in ("channel", "seconds", "period_ms"):
+        if getattr(args, option) is not None:
+            raise UsageError(f"--{option.replace('_', '-')} needs --can")
     if args.repeat is not None:
         Bound(1, 1000, "runs").check("--repeat", args.repeat)
     if args.generated is not None:
@@ -398,6 +456,56 @@ def _bench_zenoh(sizes: str) -> int:
             raise UsageError(f"--sizes: a ring team needs n >= 3 dividing 32, got {n}")
 
     print(format_zenoh_report(run_zenoh_benchmark(counts, _say_run)))
+    return 0
+
+
+def _bench_can(args: argparse.Namespace) -> int:
+    """``heft bench --can``: the AGV bridge's round trip, forwarding rate and CPU on vcan."""
+    from agent.config import Bound, ConfigError
+    from bridge.benchmark import (
+        DEFAULT_CHANNEL,
+        BenchError,
+        CanBenchSettings,
+        format_can_report,
+        run_can_benchmark,
+        vcan_problem,
+    )
+    from bridge.config import CanSettings
+
+    given = [
+        name
+        for name, value in (
+            ("SCENARIO", args.scenario),
+            ("--repeat", args.repeat),
+            ("--generated", args.generated),
+            ("--transport zenoh", args.transport == "zenoh" or None),
+        )
+        if value is not None
+    ]
+    if given:
+        raise UsageError(f"--can: {given[0]} is not an option of the CAN bridge's benchmark")
+    channel = args.channel or DEFAULT_CHANNEL
+    try:
+        CanSettings(channel=channel).validate("--channel")
+    except ConfigError as err:
+        raise UsageError(str(err).replace("--channel.channel", "--channel")) from None
+    seconds = 20.0 if args.seconds is None else args.seconds
+    period_ms = 10.0 if args.period_ms is None else args.period_ms
+    Bound(1, 3600, "s").check("--seconds", seconds)
+    Bound(1, 100, "ms").check("--period-ms", period_ms)
+    problem = vcan_problem(channel)
+    if problem is not None:
+        raise UsageError(
+            f"bench --can needs the vcan interface {channel} ({problem}); run it as:"
+            " heft vcan -- heft bench --can"
+        )
+    settings = CanBenchSettings(channel=channel, seconds=seconds, period_s=period_ms / 1000)
+    try:
+        report = run_can_benchmark(settings)
+    except BenchError as err:
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return 1
+    print(format_can_report(report))
     return 0
 
 
@@ -562,7 +670,8 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
         help="with zenoh: delay added to every message between agents (default: 0)",
     )
     _add_output_options(parser)
-    parser.set_defaults(handler=cmd_run)
+    _add_record_options(parser)
+    parser.set_defaults(handler=cmd_run, dashboard=False, dashboard_port=None, no_wait=True)
 
 
 def _add_output_options(parser: argparse.ArgumentParser) -> None:
@@ -582,6 +691,17 @@ def _add_output_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help=f"no progress lines on stderr (default: one every {PROGRESS_EVERY_S:g} simulated s)",
     )
+
+
+def _add_record_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
+        "--record",
+        metavar="FILE",
+        help="record the run's Zenoh traffic to this MCAP file (default, over Zenoh:"
+        " out/recordings/SCENARIO-DATE-TIME.mcap)",
+    )
+    group.add_argument("--no-record", action="store_true", help="do not record the run")
 
 
 def _add_scenario(commands: argparse._SubParsersAction) -> None:
@@ -655,6 +775,28 @@ def _add_bench(commands: argparse._SubParsersAction) -> None:
         help="instead: run the generated scenarios of seeds 0..N-1 (N: 1 to 1000) once each"
         " and print the median and worst errors and durations (generality)",
     )
+    parser.add_argument(
+        "--can",
+        action="store_true",
+        help="instead: the AGV bridge's benchmark on a vcan interface (run it in heft vcan --"
+        " heft bench --can): round trip CAN -> bridge -> Zenoh -> agent -> Zenoh -> bridge ->"
+        " CAN p50/p99, the fastest rate forwarded without loss, the bridge's CPU share",
+    )
+    parser.add_argument(
+        "--channel", metavar="NAME", help="with --can: the vcan interface (default: vcan8)"
+    )
+    parser.add_argument(
+        "--seconds",
+        type=float,
+        metavar="S",
+        help="with --can: length of the round-trip phase, 1 to 3600 (default: 20)",
+    )
+    parser.add_argument(
+        "--period-ms",
+        type=float,
+        metavar="MS",
+        help="with --can: the tick period of the round-trip phase, 1 to 100 (default: 10)",
+    )
     parser.set_defaults(handler=cmd_bench)
 
 
@@ -718,9 +860,24 @@ def _add_demo(commands: argparse._SubParsersAction) -> None:
         description=(
             "Run the paper's Sec. VI scenario as it would run on robots: a Zenoh router, the\n"
             "plant and four agent processes on 127.0.0.1, stepping on the wall clock. Prints\n"
-            "the table of estimates against truth at the end.\n\n"
+            "'dashboard: URL' first: the page shows the team live; prints the table of\n"
+            "estimates against truth at the end, then keeps the dashboard up (the run can be\n"
+            "replayed there from its recording) until Ctrl-C, unless --no-wait.\n\n"
             "Exit status: 0 converged, 1 not converged, 2 bad arguments, 130 interrupted."
         ),
     )
     _add_output_options(demo)
+    _add_record_options(demo)
+    demo.add_argument(
+        "--dashboard-port",
+        type=int,
+        default=8765,
+        metavar="PORT",
+        help="serve the dashboard on 127.0.0.1:PORT, 0 for any free one (default: 8765)",
+    )
+    demo.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="exit when the run ends (default: keep the dashboard up until Ctrl-C)",
+    )
     demo.set_defaults(handler=cmd_demo)

@@ -26,22 +26,19 @@ Supervision. The launcher watches every process it started, not only what the te
 Each verdict is a short machine-readable ``reason`` and a sentence for people (``detail``).
 Then it stops the plant, tells the agents to stop, and — whatever happened, success, failure,
 a signal — stops every child it started (SIGTERM to all, then SIGKILL to what is left) and
-closes its own session. Every child also asks the kernel (Linux ``PR_SET_PDEATHSIG``) for
-:data:`DEATH_SIGNAL` when the launcher dies, so even a ``kill -9`` of the launcher leaves no
-orphan.
+closes its own session. Every child (:class:`~agent.children.Child`) also asks the kernel
+(Linux ``PR_SET_PDEATHSIG``) for a signal when the launcher dies, so even a ``kill -9`` of the
+launcher leaves no orphan.
 """
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
 import json
 import logging
+import math
 import os
 import re
-import signal
-import socket
-import subprocess
 import sys
 import tempfile
 import threading
@@ -51,6 +48,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from agent.children import Child, describe_exit, free_port, stop_all, wait_all
 from agent.config import to_toml
 from agent.faults import FaultSettings
 from agent.node import AgentNodeConfig
@@ -77,28 +75,19 @@ if TYPE_CHECKING:
     from simulator.can_drivers import CanLink
 
 Progress = Callable[[float, str], None]
-PR_SET_PDEATHSIG = 1
 INTERRUPTED = "interrupted"
 ROUTER_LOST = "router lost"
 PLANT_LOST = "plant lost"
 AGENTS_NOT_UP = "agents did not come up"
 STALLED = "stalled"
 WALL_TIMEOUT = "wall-clock timeout"
-STOP_GRACE_S = 5.0
-"""How long the processes asked to stop (SIGTERM) have to exit before SIGKILL."""
 ROUTER_GRACE_S = 1.0
 """The router's time to exit on SIGTERM, last of all, before SIGKILL (``heft router`` waits for
 its stop in a way that a signal landing on one of Zenoh's threads does not always wake)."""
-DEATH_SIGNAL = signal.SIGKILL
-"""What every child gets from the kernel when the launcher dies (``PR_SET_PDEATHSIG``).
-
-Not SIGTERM, measured: the kernel sends the parent-death signal again each time the child is
-handed to another of the dying launcher's threads, so a child gets a burst of them; the
-processes' handler (``agent.process.stop_on_signals``: ``Event.set`` in a signal handler) is
-not re-entrant and deadlocks when one arrives while it runs (about 1 launcher kill in 25 left
-an agent or the plant behind), and ``heft router`` sometimes never wakes from its wait. The
-launcher is gone and nothing is recorded: there is nothing for a child to save."""
 HALT_GRACE_S = 0.5
+FINAL_GRACE_S = 2.0
+"""Messages from different processes cross: an instant after the final one may be complete
+before the final one is. The run waits this long for the final instant itself."""
 AGENT_GONE_S = 3.0
 """An agent process that exited mid-run: how long its neighbours have to halt the team before
 the launcher names it lost itself (they notice a dead process at once, a hung one after the
@@ -112,16 +101,19 @@ processes cross on the way, and a loaded machine delays some (10 s at 100 Hz).""
 KEEP_TICKS = 500
 """Ticks of unmatched estimates and truth the collector keeps (a robot may lag behind)."""
 BRIDGE_WATCHDOG_MS = 200
-"""The bridges' command watchdog in a CAN run: 20 sensor periods of the paper at 100 Hz (in
-lockstep a tripped watchdog changes nothing: the plant waits for the agent's command)."""
+"""The bridges' command watchdog in a real-time CAN run: 20 sensor periods of the paper at
+100 Hz, longer in proportion when the wall clock runs slower than real time
+(``run.real_time_factor``)."""
+LOCKSTEP_WATCHDOG_MS = 5000
+"""The bridges' watchdog in a lockstep CAN run. There a tripped watchdog changes nothing (the
+plant waits for the agent's own command), but its ZERO frames, one per period per bus, load
+the plant and slow the run further where the machine is slow (User-Mode Linux): it trips only
+when an agent is silent for much longer than any tick takes."""
+PLANT_START_TIMEOUT_S = 300.0
+"""How long the plant waits for every agent (and bridge) to come up. Ten processes that each
+import numpy took 40 s to come up in User-Mode Linux; an agent that dies on the way is seen
+by the launcher at once, so a long wait costs nothing when something fails."""
 LOG = logging.getLogger("heft.launcher")
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def robot_toml(
@@ -143,6 +135,14 @@ def robot_toml(
     return to_toml(config, f"Agent of robot {robot} of scenario {scenario.name!r}, by heft run.")
 
 
+def bridge_watchdog_ms(scenario: Scenario, clock: str) -> int:
+    """The bridges' watchdog in a run of ``scenario`` on ``clock`` (see
+    :data:`BRIDGE_WATCHDOG_MS` and :data:`LOCKSTEP_WATCHDOG_MS`)."""
+    if clock == "lockstep":
+        return LOCKSTEP_WATCHDOG_MS
+    return min(10_000, math.ceil(BRIDGE_WATCHDOG_MS / min(1.0, scenario.run.real_time_factor)))
+
+
 def can_table(robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS) -> str:
     """The ``[can]`` table of robot ``robot``'s ``robot.toml`` in a CAN run, which its AGV
     bridge (``heft bridge``) reads beside the agent's part: its robot's bus, as the plant
@@ -162,139 +162,6 @@ def can_table(robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS) -
 def _toml_string(text: str) -> str:
     """``text`` as a TOML basic string (JSON's escapes are TOML's)."""
     return json.dumps(text, ensure_ascii=False)
-
-
-_prctl = None
-
-
-def _die_with_parent(death_signal: int = DEATH_SIGNAL) -> Callable[[], None] | None:
-    """A ``preexec_fn`` by which the child, before it runs, asks for ``death_signal`` when the
-    launcher dies, however it dies (Linux ``PR_SET_PDEATHSIG``), so that a killed launcher
-    leaves no orphan; None where there is no ``prctl``.
-
-    ``prctl`` is looked up here, in the launcher: between ``fork`` and ``exec`` the child only
-    calls it (no ``dlopen``, whose locks another thread may hold). A launcher that died before
-    the child's ``prctl`` is caught by comparing the parent's pid. The signal follows the
-    *thread* that started the child: start children from a thread that outlives them."""
-    global _prctl
-    if _prctl is None:
-        try:
-            _prctl = ctypes.CDLL(None, use_errno=True).prctl
-        except (OSError, AttributeError):  # not Linux
-            return None
-    prctl, parent, sig = _prctl, os.getpid(), int(death_signal)
-
-    def preexec() -> None:
-        prctl(PR_SET_PDEATHSIG, sig)
-        if os.getppid() != parent:  # the launcher is already gone
-            os._exit(1)
-
-    return preexec
-
-
-def describe_exit(code: int) -> str:
-    """A process's exit as words: ``exit status 2``, ``killed by SIGKILL``."""
-    if code < 0:
-        try:
-            return f"killed by {signal.Signals(-code).name}"
-        except ValueError:
-            return f"killed by signal {-code}"
-    return f"exit status {code}"
-
-
-class Child:
-    """A child process whose output lines are copied to ``stream`` behind ``[name]``; it gets
-    ``death_signal`` if the launcher dies."""
-
-    def __init__(
-        self,
-        name: str,
-        args: list[str],
-        stream: TextIO,
-        env: dict[str, str],
-        death_signal: int = DEATH_SIGNAL,
-    ):
-        self.name = name
-        self.last_line = ""
-        self.process = subprocess.Popen(
-            args,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            text=True,
-            bufsize=1,
-            env=env,
-            preexec_fn=_die_with_parent(death_signal),
-        )
-        self._thread = threading.Thread(target=self._copy, args=(stream,), daemon=True)
-        self._thread.start()
-
-    def _copy(self, stream: TextIO) -> None:
-        try:
-            for line in self.process.stdout:
-                if line.strip():
-                    self.last_line = line.strip()
-                stream.write(f"[{self.name}] {line}")
-                stream.flush()
-        except (OSError, ValueError):  # the launcher's stream is closed: the lines are lost
-            pass
-
-    def last_words(self) -> str:
-        """The last line an exited process wrote (e.g. its ``heft: error: ...``), or ``""``."""
-        self._thread.join(timeout=1.0)  # the rest of its output, up to the end of the pipe
-        return self.last_line.removeprefix("heft: error: ")
-
-    def ended(self, code: int) -> str:
-        """``exit status 2: <its last line>``, for a verdict."""
-        said = self.last_words()
-        return f"{describe_exit(code)}: {said}" if said else describe_exit(code)
-
-    def cpu_seconds(self) -> float | None:
-        """User + system CPU time the process has used so far (Linux ``/proc``)."""
-        try:
-            fields = Path(f"/proc/{self.process.pid}/stat").read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            return None
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-    def terminate(self) -> None:
-        """SIGTERM (after SIGCONT: a stopped process cannot exit), if it still runs."""
-        if self.process.poll() is None:
-            try:
-                self.process.send_signal(signal.SIGCONT)
-                self.process.send_signal(signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-
-    def stop(self, grace_s: float = STOP_GRACE_S) -> None:
-        """SIGTERM, up to ``grace_s`` to exit, then SIGKILL."""
-        stop_all([self], grace_s)
-
-
-def wait_all(children: Sequence[Child], timeout_s: float) -> bool:
-    """Wait up to ``timeout_s`` for every one of ``children`` to exit; True if they did."""
-    deadline = time.monotonic() + timeout_s
-    for child in children:
-        try:
-            child.process.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            return False
-    return True
-
-
-def stop_all(children: Sequence[Child], grace_s: float = STOP_GRACE_S) -> None:
-    """Stop ``children`` together: SIGTERM to every one still running, up to ``grace_s`` for
-    all of them to exit, then SIGKILL to the rest (a hung process cannot hold the run up)."""
-    for child in children:
-        child.terminate()
-    if not wait_all(children, grace_s):
-        for child in children:
-            if child.process.poll() is None:
-                LOG.warning("%s did not stop within %.0f s: killed", child.name, grace_s)
-                child.process.kill()
-        wait_all(children, grace_s)
-    for child in children:
-        child._thread.join(timeout=1.0)
 
 
 class Collector:
@@ -325,7 +192,8 @@ class Collector:
         self.latest: Sample | None = None
         """The newest complete sample before the team was done."""
         self.final: Sample | None = None
-        """The sample at the final instant, once heard."""
+        """The sample at the final instant, once heard (until then, maybe a later one)."""
+        self.final_at = 0.0
         self.latest_tick = 0
         self._finished = False
         self.first_truth_at: float | None = None
@@ -432,6 +300,8 @@ class Collector:
             if self.latest is None or instant > self.latest.truth.tick:
                 self.latest = sample
         elif self.final is None or instant < self.final.truth.tick:
+            if self.final is None:
+                self.final_at = time.perf_counter()
             self.final = sample
         for old in [t for t in self.truths if t < instant - KEEP_TICKS]:
             del self.truths[old]
@@ -445,8 +315,12 @@ class Collector:
 
     def finished(self) -> bool:
         # After a halt, a moment more to hear who was lost (agents and plant report it).
-        halt_over = self.halted and time.perf_counter() - self.halted_at > HALT_GRACE_S
-        self._finished = self._finished or halt_over or self.final is not None
+        now = time.perf_counter()
+        halt_over = self.halted and now - self.halted_at > HALT_GRACE_S
+        final = self.final is not None and (
+            self.final.truth.tick == self.done_instant or now - self.final_at > FINAL_GRACE_S
+        )
+        self._finished = self._finished or halt_over or final
         if self._finished and self.finished_at is None:
             self.finished_at = time.perf_counter()
         return self._finished
@@ -512,9 +386,14 @@ def run_zenoh(
     wall_timeout_s: float | None = None,
     stop: threading.Event | None = None,
     can: CanLink | None = None,
+    on_ready: Callable[[str, str], None] | None = None,
 ) -> RunOutcome:
     """Run ``scenario`` with one process per robot over Zenoh (see the module docstring);
     with ``can``, the robots on CAN behind one AGV bridge each.
+
+    ``on_ready(router, team)`` is called once the run's router is up at endpoint ``router``,
+    before the plant and the agents start: a recorder or a dashboard subscribes to team
+    ``team`` there and misses nothing of the run.
 
     The run ends early, with the verdict ``interrupted``, once ``stop`` is set (``heft run``
     sets it on SIGINT, SIGTERM and SIGHUP) or on ``KeyboardInterrupt``; the processes are
@@ -536,7 +415,9 @@ def run_zenoh(
 
     started = time.perf_counter()
     if wall_timeout_s is None:
-        wall_timeout_s = 60.0 + 20.0 * scenario.run.max_time_s
+        wall_timeout_s = 60.0 + 20.0 * scenario.run.max_time_s / min(
+            1.0, scenario.run.real_time_factor
+        )
     cpu: dict[str, float | None] = {}
     verdict = Verdict(INTERRUPTED, "asked to stop")
     collector: Collector | None = None
@@ -548,6 +429,8 @@ def run_zenoh(
             router_child = start("router", ["router", "--listen", router])
             with _launcher_session(router, router_child) as session:
                 collector = Collector(session, keys, scenario.n, record_every)
+                if on_ready is not None:
+                    on_ready(router, team)
                 plant: Child | None = None
                 agents: list[Child] = []
                 bridges: list[Child] = []
@@ -558,6 +441,7 @@ def run_zenoh(
                                 "plant",
                                 ["sim", str(scenario_file), "--team", team, "--clock", clock]
                                 + ["--connect", router]
+                                + ["--start-timeout", f"{PLANT_START_TIMEOUT_S:g}"]
                                 + _can_options(can),
                             )
                         for i in range(1, scenario.n + 1):
@@ -566,7 +450,7 @@ def run_zenoh(
                             config = folder / f"robot-{i}.toml"
                             text = robot_toml(i, scenario, team, clock, router, faults)
                             if can is not None:
-                                text += can_table(i, can)
+                                text += can_table(i, can, bridge_watchdog_ms(scenario, clock))
                             config.write_text(text, encoding="utf-8")
                             if can is not None:
                                 args = ["bridge", "--config", str(config)]

@@ -7,7 +7,8 @@ counters.
 
 - ``lockstep``: tick ``k`` is published, and the plant steps only once every live agent's
   command for tick ``k`` has arrived: deterministic, as fast as the agents allow. A robot that
-  has not answered within :data:`RESEND_AFTER_S` is sent the tick again.
+  has not answered within a timeout that follows the time a tick takes
+  (:class:`~agent.resend.ResendTimeout`) is sent the tick again.
 - ``realtime``: the plant steps on the wall clock at the sensor rate, applying the newest
   command each robot has sent; late and missing commands are held (the previous one stays)
   and counted, and the latency from publishing a tick to receiving each command is measured.
@@ -32,6 +33,7 @@ from typing import TYPE_CHECKING
 
 from agent.process import RejectLog
 from agent.protocol import Clock, Command, Control, Keys, Measurement, PlantStatus
+from agent.resend import ResendTimeout
 from agent.robot_io import AgentsPort, Liveliness
 from agent.zenoh_robot_io import ZenohAgentsPort
 from agent.zenoh_session import ZenohSettings, open_session
@@ -45,8 +47,10 @@ log = logging.getLogger("heft.sim")
 LATENCY_SAMPLES = 10_000
 """Command latencies kept for the percentiles: the newest 25 s of four robots at 100 Hz
 (memory stays flat however long the plant runs)."""
-RESEND_AFTER_S = 0.2
-"""Lockstep: a tick not answered within this time is sent again to the silent robots."""
+SLOW_TICK_S = 2.0
+"""Lockstep: a tick that waits this long for a command is logged (once)."""
+WAIT_S = 0.2
+"""The longest the loop waits for something to arrive before it looks at its stop."""
 
 
 class PlantNode:
@@ -78,6 +82,7 @@ class PlantNode:
         """The newest command latencies (s), for the percentiles of :meth:`status`."""
         self.latency_count = 0
         self._published_at = 0.0
+        self.resend = ResendTimeout()
 
     # ------------------------------------------------------------------ events
     def _handle(self, arrived: float, item) -> None:
@@ -132,14 +137,17 @@ class PlantNode:
             self.port.send(measurement)
         self.port.report(Clock(k, self.plant.time_s))
 
-    def _republish_to_the_silent(self) -> None:
-        """Lockstep: send tick ``k`` again to the robots that have not answered it."""
+    def _republish_to_the_silent(self) -> list[int]:
+        """Lockstep: send tick ``k`` again to the robots that have not answered it; which."""
         k = self.plant.tick
+        silent = []
         for robot in range(1, self.scenario.n + 1):
             command = self.commands.get(robot)
             if robot not in self.lost and (command is None or command.tick < k):
                 self.port.send(self._sent[robot - 1])
                 self.resent += 1
+                silent.append(robot)
+        return silent
 
     def _apply(self) -> None:
         k = self.plant.tick
@@ -166,6 +174,28 @@ class PlantNode:
                 return False
         return True
 
+    def _lockstep_wait(self) -> None:
+        """Until every live robot answered this tick; the silent ones are sent it again after
+        :attr:`resend`'s timeout (the time a tick takes, adapted)."""
+        published = asked = time.monotonic()
+        resent = told = False
+        while not self.stop.is_set() and not self._everyone_answered():
+            due = asked + self.resend.timeout_s
+            self._drain(max(0.0, min(WAIT_S, due - time.monotonic())))
+            if time.monotonic() >= due and not self._everyone_answered():
+                silent = self._republish_to_the_silent()
+                asked, resent = time.monotonic(), True
+                if not told and asked - published > SLOW_TICK_S:
+                    told = True
+                    log.warning(
+                        "tick %d: no command from robot(s) %s for %.1f s; sending it again",
+                        self.plant.tick,
+                        silent,
+                        asked - published,
+                    )
+        if not resent and not self.stop.is_set():
+            self.resend.observe(time.monotonic() - published)
+
     def wait_for_agents(self) -> bool:
         deadline = time.monotonic() + self.start_timeout_s
         n = self.scenario.n
@@ -178,28 +208,26 @@ class PlantNode:
                     self.start_timeout_s,
                 )
                 return False
-            self._drain(0.05)
+            self._drain(WAIT_S)
         return not self.stop.is_set()
 
     def run(self) -> int:
         s = self.scenario
-        log.info("plant up: %r, %d robots, %s clock", s.name, s.n, self.clock)
+        pace = ""
+        if self.clock == "realtime" and s.run.real_time_factor != 1.0:
+            pace = f" at {s.run.real_time_factor:g} x real time"
+        log.info("plant up: %r, %d robots, %s clock%s", s.name, s.n, self.clock, pace)
         if not self.wait_for_agents():
             self.publish_status()
             return 0 if self.stop.is_set() else 1  # stopped before the start, or agents missing
         log.info("all %d agents are up; starting", s.n)
         max_ticks = round(s.run.max_time_s / s.period_s)
-        period = s.period_s
+        period = s.period_s / s.run.real_time_factor  # wall-clock seconds per tick
         start = time.monotonic()
         while not self.stop.is_set() and self.plant.tick <= max_ticks:
             self._publish()
             if self.clock == "lockstep":
-                asked = time.monotonic()
-                while not self.stop.is_set() and not self._everyone_answered():
-                    self._drain(0.05)
-                    if time.monotonic() - asked > RESEND_AFTER_S:
-                        self._republish_to_the_silent()
-                        asked = time.monotonic()
+                self._lockstep_wait()
             else:
                 deadline = start + (self.plant.tick + 1) * period
                 while True:

@@ -152,6 +152,11 @@ class RunSettings:
     :data:`MAX_SUBSTEPS` (100) times it."""
     max_time_s: float = bounded(60.0, 0, MAX_TIME_S, "s", open_low=True)
     """Simulated-time limit of a run (s)."""
+    real_time_factor: float = bounded(1.0, 0.01, 100.0)
+    """The pace of the wall clock (``--clock realtime``): simulated seconds per wall-clock
+    second. 1 is real time; below 1 gives each tick more wall time, for a machine that cannot
+    keep up at the sensor rate (User-Mode Linux, a loaded laptop). The physics, the ticks and
+    the estimates are the same; only the wall time between ticks changes. Lockstep ignores it."""
 
     def validate(self, where: str) -> None:
         """Raise :class:`ConfigError` naming the key and its range unless every field is in

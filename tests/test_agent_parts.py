@@ -23,6 +23,7 @@ from agent.estimation.settling import SettleDetectors
 from agent.inbox import HISTORY_TICKS, Inbox
 from agent.phase_machine import PhaseMachine
 from agent.protocol import Measurement, Phase, Share
+from agent.resend import ResendTimeout
 
 DT = 0.01
 TUNING = AgentTuning(kick_duration_s=0.05, switch_margin_ticks=2)
@@ -399,3 +400,25 @@ def test_a_phase_this_robot_has_no_estimates_for_halts_the_team(phase, own):
     assert m.step(40, own, [share(1, 39, phase=phase)])
     assert m.phase is Phase.HALTED and m.since == 40
     assert m.force(40, own) == (0.0, 0.0)
+
+
+# ------------------------------------------------------------------------- resend timeout
+def test_the_resend_timeout_follows_the_pace_within_its_bounds():
+    """RFC 6298's estimator: the floor before any sample and while ticks are fast; the time a
+    tick takes plus four deviations once ticks are slow; the ceiling however slow."""
+    timeout = ResendTimeout(floor_s=0.2, ceiling_s=5.0)  # the default ceiling is 1 s
+    assert timeout.timeout_s == 0.2
+    for _ in range(50):
+        timeout.observe(0.01)
+    assert timeout.timeout_s == 0.2
+    slow = ResendTimeout(floor_s=0.2, ceiling_s=5.0)
+    slow.observe(0.5)  # first sample: SRTT = 0.5, RTTVAR = 0.25
+    assert slow.timeout_s == pytest.approx(0.5 + 4 * 0.25)
+    for _ in range(200):
+        slow.observe(0.5)
+    assert slow.timeout_s == pytest.approx(0.5, rel=1e-3)  # steady: the deviation decays
+    slow.observe(-1.0)  # not a duration: ignored
+    assert slow.timeout_s == pytest.approx(0.5, rel=1e-3)
+    for _ in range(50):
+        slow.observe(30.0)
+    assert slow.timeout_s == 5.0

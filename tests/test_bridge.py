@@ -16,7 +16,7 @@ from agent.config import ConfigError
 from agent.process import RejectLog
 from agent.protocol import BridgeStatus, Command, Measurement, decode, encode
 from agent.robot_io import AgentsPort
-from bridge.bridge import Bridge
+from bridge.bridge import CAN_ERR_BUSOFF, Bridge
 from bridge.codec import (
     AgvCodec,
     AppliedForce,
@@ -29,6 +29,7 @@ from bridge.config import CanSettings, load_bridge_config
 from bridge.dbc import MAX_FORCE
 from bridge.node import BridgeNode, open_bus
 from bridge.timing import EPOCH, ClockTicks, SyncTicks
+from tests.random_frames import random_frames
 
 CODEC = AgvCodec()
 LOG = logging.getLogger("test.bridge")
@@ -188,13 +189,17 @@ def test_the_watchdog_commands_zero_force_then_clears_when_commands_return() -> 
     (zero,) = bridge.watchdog(1.1001)
     assert CODEC.decode(zero) == ForceCommand(2, 3, (0.0, 0.0), False)
     assert bridge.tripped and bridge.status().watchdog and bridge.status().watchdog_trips == 1
-    assert bridge.watchdog(1.105) == []  # at most one frame a period
-    assert len(bridge.watchdog(1.1101)) == 1
+    assert bridge.watchdog(1.15) == []  # no new tick: the next one a watchdog_s later
+    assert len(bridge.watchdog(1.2002)) == 1
     feed(bridge, Sync(4))
-    (frame,) = bridge.command(Command(2, 4, (1.0, 0.0)), at=1.2)
+    assert bridge.watchdog(1.205) == []  # a new tick, but at most one frame a period
+    (zero,) = bridge.watchdog(1.2103)  # one for the new tick
+    assert CODEC.decode(zero) == ForceCommand(2, 4, (0.0, 0.0), False)
+    assert bridge.watchdog(1.22) == []
+    (frame,) = bridge.command(Command(2, 4, (1.0, 0.0)), at=1.23)
     assert CODEC.decode(frame).apply and not bridge.tripped
-    assert bridge.watchdog(1.25) == []
-    assert len(bridge.watchdog(1.31)) == 1 and bridge.status().watchdog_trips == 2
+    assert bridge.watchdog(1.28) == []
+    assert len(bridge.watchdog(1.34)) == 1 and bridge.status().watchdog_trips == 2
 
 
 def test_next_check_is_the_watchdogs_deadline() -> None:
@@ -342,3 +347,59 @@ def test_a_bus_that_cannot_be_opened_is_one_line() -> None:
     with pytest.raises(Exception, match="CAN bus nosuch/x: cannot open it") as caught:
         open_bus(CanSettings(interface="nosuch", channel="x"))
     assert "\n" not in str(caught.value)
+
+
+def test_100000_random_frames_are_counted_by_reason_while_the_valid_traffic_flows(
+    tmp_path,
+) -> None:
+    """The bridge's loop on a virtual bus takes 100 000 frames it must refuse (random ids,
+    lengths, payloads, error and remote frames), in bursts between the driver's ticks: it
+    keeps running, turns every tick into a measurement and every command into a frame, and
+    its counters say exactly what was sent, reason by reason."""
+    path = tmp_path / "robot.toml"
+    path.write_text(ROBOT + '[can]\ninterface = "virtual"\nchannel = "t-random"\n', "utf-8")
+    node = BridgeNode(load_bridge_config(path), RecordingPort())
+    driver = can.Bus(interface="virtual", channel="t-random", receive_own_messages=False)
+    junk, reasons = random_frames(100_000, seed=8, codec=CODEC)
+    bus_off = sum(1 for m in junk if m.is_error_frame and m.arbitration_id & CAN_ERR_BUSOFF)
+    node.open()
+    runner = threading.Thread(target=node.run)
+    runner.start()
+    ticks = 200
+    try:
+        deadline = time.monotonic() + 120
+        for tick in range(ticks):
+            for message in junk[tick * 250 : (tick + 1) * 250]:
+                driver.send(message)
+            for frame in tick_frames(tick):
+                driver.send(CODEC.encode(frame))
+            for message in junk[(tick + ticks) * 250 : (tick + ticks + 1) * 250]:
+                driver.send(message)
+            while len(node.port.sent) <= tick:  # the agent answers once it has the sample
+                assert time.monotonic() < deadline and runner.is_alive()
+                time.sleep(0.001)
+            node.port.events.put((time.perf_counter(), Command(2, tick, (1.0, 2.0))))
+        while node.bridge.counts["frames in"] < len(junk) + 3 * ticks:
+            assert time.monotonic() < deadline and runner.is_alive()
+            time.sleep(0.05)
+        answers = []  # the commands' frames (then the watchdog's, once commands stop)
+        while len([f for f in answers if f.apply]) < ticks:
+            message = driver.recv(2.0)
+            assert message is not None, f"{len(answers)} frames back, then nothing"
+            answers.append(CODEC.decode(message))
+    finally:
+        node.stop.set()
+        runner.join(10)
+        node._close_bus()
+        driver.shutdown()
+    bridge = node.bridge
+    assert [m.tick for m in node.port.sent] == list(range(ticks))
+    assert [f.counter for f in answers if f.apply] == [t % 16 for t in range(ticks)]
+    assert bridge.counts["frames in"] == len(junk) + 3 * ticks
+    assert bridge.counts["bus errors"] == sum(1 for m in junk if m.is_error_frame)
+    expected = {("can frame", why): n for why, n in reasons.items()}
+    expected["can frame", "error frame"] -= bus_off
+    expected["can frame", "bus off"] = bus_off
+    assert dict(bridge.rejects.reasons) == {k: n for k, n in expected.items() if n}
+    assert bridge.status().decode_errors == len(junk) - bus_off
+    assert bridge.counts["missed ticks"] == 0 and bridge.counts["counter jumps"] == 0

@@ -23,11 +23,11 @@ from typing import Any
 
 import pytest
 
+from agent.children import free_port
 from agent.config import MAX_ROBOTS, MAX_SEED, AgentTuning, Bound, bounds, toml_value
 from agent.dispatch import main
 from agent.node import AgentNodeConfig, load_agent_config
 from agent.zenoh_session import SessionError, ZenohSettings, open_session
-from simulator.launcher import free_port
 from simulator.scenario import (
     MAX_COORDINATE,
     MAX_POSITION,

@@ -73,6 +73,20 @@ def test_robot_file_loads_as_documented(robot: int, deployed) -> None:
     assert config.tuning == AgentTuning()  # the paper's gains
 
 
+@pytest.mark.parametrize("robot", sorted(ROBOT_FILES))
+def test_robot_file_is_also_its_bridges_config(robot: int, deployed) -> None:
+    """The robot's AGV bridge reads the same file: its bus, node id, 100 ms watchdog, Sync
+    ticks and real-time priority; the agent part is the agent's."""
+    from bridge.config import CanSettings, load_bridge_config
+
+    config = load_bridge_config(ROBOT_FILES[robot])
+    assert config.robot == deployed[robot]
+    assert config.can == CanSettings(
+        interface="socketcan", channel="can0", watchdog_ms=100, realtime_priority=50
+    )
+    assert config.node == robot
+
+
 def test_robot_files_share_the_team_settings(deployed) -> None:
     def team_part(c: AgentNodeConfig) -> AgentNodeConfig:
         return dataclasses.replace(c, robot=1, neighbours=(2,))

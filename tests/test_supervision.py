@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from agent.dispatch import main
+from agent.protocol import Estimates, Keys, Phase, Truth, encode
 from simulator import launcher
 from simulator.scenario import load_scenario
 from tests.conftest import (
@@ -310,3 +311,61 @@ def test_a_slow_start_is_not_a_stall(monkeypatch) -> None:
     outcome = launcher.run_zenoh(load_scenario(PAPER), log_stream=io.StringIO())
     assert outcome.converged, outcome.detail
     assert worst_errors(outcome)["mass"] < 1e-4
+
+
+class _Subscriptions:
+    """Just enough of a Zenoh session for a :class:`launcher.Collector` fed by hand."""
+
+    def declare_subscriber(self, key, callback):
+        return _Undeclared()
+
+
+class _Undeclared:
+    def undeclare(self) -> None:
+        pass
+
+
+def _truth(tick: int) -> Truth:
+    return Truth(
+        tick=tick,
+        time_s=tick * 0.01,
+        com_position=(0.0, 0.0),
+        angle=0.0,
+        com_velocity=(0.0, 0.0),
+        omega=0.0,
+        contacts=((1.0, 0.0), (-1.0, 0.0)),
+        contact_velocities=((0.0, 0.0), (0.0, 0.0)),
+        contact_to_com=((-1.0, 0.0), (1.0, 0.0)),
+        mass=5.0,
+        moment=2.0,
+    )
+
+
+def test_the_final_instant_is_the_first_at_which_every_robot_is_done(monkeypatch) -> None:
+    """Messages from different processes cross: the instant after the final one may be complete
+    first. The collector still ends on the final instant, the one the in-process run ends on;
+    if the final instant never completes, it ends on the later one after a grace."""
+    keys = Keys("t")
+    for final_arrives in (True, False):
+        collector = launcher.Collector(_Subscriptions(), keys, 2, record_every=5)
+        # Robot 1 done since 98, robot 2 since 100: the final instant is 100.
+        messages = [(Truth, _truth(101))]
+        messages += [
+            (Estimates, Estimates(r, 101, Phase.DONE, since)) for r, since in [(1, 98), (2, 100)]
+        ]
+        messages += [
+            (Estimates, Estimates(r, 100, Phase.DONE, since)) for r, since in [(1, 98), (2, 100)]
+        ]
+        for kind, message in messages:
+            collector.events.put((kind, encode(message)))
+        collector.drain(0.0)
+        assert collector.final is not None and collector.final.truth.tick == 101
+        assert not collector.finished()
+        if final_arrives:
+            collector.events.put((Truth, encode(_truth(100))))
+            collector.drain(0.0)
+            assert collector.finished() and collector.final.truth.tick == 100
+        else:
+            monkeypatch.setattr(launcher, "FINAL_GRACE_S", 0.0)
+            assert collector.finished() and collector.final.truth.tick == 101
+            monkeypatch.undo()

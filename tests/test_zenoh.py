@@ -15,13 +15,14 @@ from pathlib import Path
 
 import pytest
 
+from agent.children import free_port
 from agent.faults import FaultSettings
 from agent.node import AgentNodeConfig, zenoh_agent_node
 from agent.protocol import Keys, Measurement, Share, encode
 from agent.zenoh_session import ZenohSettings, open_session
 from simulator.generate import generate_scenario
 from simulator.inprocess import run_inprocess
-from simulator.launcher import free_port, run_zenoh
+from simulator.launcher import run_zenoh
 from simulator.scenario import load_scenario
 from tests.conftest import (
     PAPER,

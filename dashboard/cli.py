@@ -1,0 +1,263 @@
+"""The dashboard package's commands::
+
+    heft dashboard [--team T] [--connect ENDPOINT] [--host H] [--port P] [--token TOKEN]
+                   [--scenario FILE] [--replay FILE [--speed X] [--paused]]
+    heft record --team T -o FILE [--scenario FILE] [--duration S] [Zenoh options]
+
+Both run until SIGINT, SIGTERM or SIGHUP (exit status 0); bad input is one ``heft: error:``
+line and exit status 2; a busy port or an unreachable router is exit status 4.
+
+Building the parser imports nothing of FastAPI, uvicorn or MCAP: the handlers do.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+from pathlib import Path
+
+from agent.command_line import (
+    HelpFormatter,
+    UsageError,
+    add_zenoh_options,
+    check_writable,
+    setup_logging,
+    zenoh_settings,
+)
+from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings
+from dashboard.display import DEFAULT_PORT
+
+TOKEN_ENV = "HEFT_DASHBOARD_TOKEN"
+MAX_SPEED = 1000.0
+LOG = logging.getLogger("heft.dashboard")
+
+
+def _keys(team: str | None, option: str = "--team"):
+    from agent.protocol import Keys
+
+    if team is None:
+        return None
+    try:
+        return Keys(team)
+    except ValueError as err:
+        raise UsageError(f"{option}: {err}") from None
+
+
+def _geometry(path: str | None):
+    """The load geometry of ``--scenario FILE``, or None."""
+    if path is None:
+        return None
+    from dashboard.geometry import LoadGeometry
+    from simulator.scenario import ScenarioError, load_scenario
+
+    try:
+        return LoadGeometry.from_scenario(load_scenario(path))
+    except ScenarioError as err:
+        raise UsageError(f"--scenario: {err}") from None
+
+
+def _speed(value: str) -> float:
+    """``--speed``: a factor in [0.01, 1000], or ``max`` (0: as fast as possible)."""
+    if value == "max":
+        return 0.0
+    try:
+        speed = float(value)
+    except ValueError:
+        raise UsageError(f"--speed: expected a number or 'max', got {value!r}") from None
+    if not (math.isfinite(speed) and 0.01 <= speed <= MAX_SPEED):
+        raise UsageError(f"--speed: expected a factor in [0.01, 1000] or 'max', got {value}")
+    return speed
+
+
+# ------------------------------------------------------------------------------ heft dashboard
+def cmd_dashboard(args: argparse.Namespace) -> int:
+    """``heft dashboard``: serve the page for a live team or a recording until a signal."""
+    from agent.process import stop_on_signals
+    from dashboard.display import Display
+    from dashboard.server import ServeError, is_loopback
+
+    token = args.token or os.environ.get(TOKEN_ENV) or None
+    if not is_loopback(args.host) and token is None:
+        raise UsageError(
+            f"--host {args.host}: listening beyond this machine needs a token (--token or"
+            f" {TOKEN_ENV})"
+        )
+    if not 0 <= args.port <= 65535:
+        raise UsageError(f"--port: expected 0 to 65535, got {args.port}")
+    geometry = _geometry(args.scenario)
+    if args.replay is None and args.team is None:
+        raise UsageError("--team: needed to watch a live team (or give --replay FILE)")
+    speed = 1.0
+    if args.replay is not None:
+        from dashboard.replay import Recording, RecordingError
+
+        if args.team is not None or args.connect:
+            raise UsageError("--replay plays a recording: --team and --connect do not apply")
+        if args.speed is not None:
+            speed = _speed(args.speed)
+        if not Path(args.replay).is_file():
+            raise UsageError(f"--replay: {args.replay}: no such file")
+        try:
+            Recording(args.replay).header()
+        except RecordingError as err:
+            raise UsageError(f"--replay: {err}") from None
+    elif args.speed is not None or args.paused:
+        raise UsageError("--speed and --paused need --replay FILE")
+    keys = _keys(args.team)
+    settings = None
+    if args.replay is None:
+        settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
+    setup_logging()
+    try:
+        display = Display.open(
+            team=None if keys is None else keys.team,
+            geometry=geometry,
+            host=args.host,
+            port=args.port,
+            token=token,
+        )
+    except ServeError as err:
+        raise _network_error(str(err)) from None
+    stop = stop_on_signals()
+    try:
+        if args.replay is not None:
+            display.hub.replay(Path(args.replay), speed=speed, paused=args.paused)
+        else:
+            display.watch(settings)
+        print(f"dashboard: {display.url}", flush=True)
+        stop.wait()
+    finally:
+        display.close()
+    return 0
+
+
+def _network_error(message: str) -> Exception:
+    """A busy port: exit status 4, as an unreachable router is."""
+    from agent.zenoh_session import SessionError
+
+    return SessionError(message)
+
+
+# ------------------------------------------------------------------------------ heft record
+def cmd_record(args: argparse.Namespace) -> int:
+    """``heft record``: write a team's traffic to MCAP until a signal or ``--duration``."""
+    from agent.process import stop_on_signals
+    from dashboard.display import TeamRecording
+
+    keys = _keys(args.team)
+    output = Path(args.output)
+    check_writable(output)
+    if args.duration is not None and not (0 < args.duration <= 7 * 24 * 3600):
+        raise UsageError(f"--duration: expected (0, 604800] s, got {args.duration:g}")
+    geometry = _geometry(args.scenario)
+    settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
+    setup_logging()
+    stop = stop_on_signals()
+    recording = TeamRecording.open(output, keys.team, geometry, settings)
+    LOG.info("recording team %r to %s", keys.team, output)
+    try:
+        stop.wait(args.duration)
+    finally:
+        recording.close()
+    LOG.info("recorded %d messages to %s", recording.recorder.messages, output)
+    return 0
+
+
+# ------------------------------------------------------------------------------ the parsers
+def register(commands: argparse._SubParsersAction) -> None:
+    """Add ``heft dashboard`` and ``heft record`` (entry point of the group
+    ``heft.commands``)."""
+    _add_dashboard(commands)
+    _add_record(commands)
+
+
+def _add_dashboard(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "dashboard",
+        help="a web page of the team's estimates converging, live or replayed",
+        formatter_class=HelpFormatter,
+        description=(
+            "Serve a web page that shows a team live over Zenoh, or a recording replayed:\n"
+            "every robot's m and J against the truth, the edges' |z_ij|, the COM offset, the\n"
+            "rotation rate, the phase timeline, the communication graph's health, a top view\n"
+            "of the load, alarms and the final table. Prints 'dashboard: URL' once serving.\n\n"
+            "It listens on 127.0.0.1 unless told otherwise; any other address needs a token,\n"
+            f"given with --token or ${TOKEN_ENV}, on every request (header\n"
+            "'Authorization: Bearer TOKEN', or ?token=TOKEN in the URL).\n\n"
+            "Exit status: 0 stopped by SIGINT/SIGTERM/SIGHUP, 2 bad arguments, 4 the port is\n"
+            "busy or the router does not answer."
+        ),
+        epilog=(
+            "examples:\n"
+            "  heft dashboard --team paper --connect tcp/127.0.0.1:7447\n"
+            "  heft dashboard --replay run.mcap --speed 10\n"
+            "  heft dashboard --team paper --host 0.0.0.0 --token s3cret"
+        ),
+    )
+    parser.add_argument("--team", help="the team to watch live (required without --replay)")
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)"
+    )
+    parser.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_PORT,
+        help=f"port to listen on, 0 for any free one (default: {DEFAULT_PORT})",
+    )
+    parser.add_argument(
+        "--token", help=f"required from every client (default: ${TOKEN_ENV}, else none)"
+    )
+    parser.add_argument(
+        "--scenario",
+        metavar="FILE",
+        help="the run's scenario TOML: the load's outline and the graph (default: none)",
+    )
+    parser.add_argument(
+        "--replay", metavar="FILE", help="replay this MCAP recording instead of a live team"
+    )
+    parser.add_argument(
+        "--speed",
+        metavar="X",
+        help="with --replay: recorded seconds per second, 0.01 to 1000, or max (default: 1)",
+    )
+    parser.add_argument(
+        "--paused",
+        action="store_true",
+        help="with --replay: start paused, to step through it from the page",
+    )
+    add_zenoh_options(parser, connect=DEFAULT_ROUTER, listen="none")
+    parser.set_defaults(handler=cmd_dashboard)
+
+
+def _add_record(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "record",
+        help="record a team's Zenoh traffic to an MCAP file",
+        formatter_class=HelpFormatter,
+        description=(
+            "Record every message of a team (measurements, commands, shares, estimates,\n"
+            "statuses, the plant's truth and clock, bridges' status) to an MCAP file with\n"
+            "JSON-schema channels: it opens in Foxglove and PlotJuggler with named fields and\n"
+            "replays with heft dashboard --replay. Chunks are flushed every 0.5 s, so a\n"
+            "recorder that is killed leaves a file readable up to then; SIGINT, SIGTERM or\n"
+            "SIGHUP close it properly.\n\n"
+            "Exit status: 0 stopped, 2 bad arguments, 4 the router does not answer."
+        ),
+        epilog="example: heft record --team paper -o run.mcap --connect tcp/127.0.0.1:7447",
+    )
+    parser.add_argument("--team", required=True, help="the team to record (required)")
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="FILE", help="the MCAP file to write (required)"
+    )
+    parser.add_argument(
+        "--scenario",
+        metavar="FILE",
+        help="the run's scenario TOML, stored for the replay's top view (default: none)",
+    )
+    parser.add_argument(
+        "--duration", type=float, metavar="S", help="stop after S seconds (default: at a signal)"
+    )
+    add_zenoh_options(parser, connect=DEFAULT_ROUTER, listen="none")
+    parser.set_defaults(handler=cmd_record)

@@ -1,0 +1,177 @@
+"""The live source: a team's messages from Zenoh, decoded on a thread of their own.
+
+Zenoh's callbacks only append ``(key, payload, arrival)`` to a bounded inbox (a flood fills it
+and is counted, never memory); a worker thread takes the inbox every :data:`POLL_S`, decodes
+each payload through the protocol (:func:`dashboard.channels.decode_on`: every field checked,
+a robot's message only on its own key), counts and drops what fails, and hands the rest to
+the sinks (the dashboard's hub, a recorder) in one batch.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+
+from agent.config import MAX_ROBOTS
+from agent.process import RejectLog
+from agent.protocol import DecodeError, Keys
+from agent.zenoh_session import ZenohSettings, open_session, watch_liveliness
+from dashboard.channels import decode_on, team_wildcard
+
+POLL_S = 0.02
+INBOX = 100_000
+"""Messages waiting for the worker, at most; beyond, new ones are dropped and counted."""
+LOG = logging.getLogger("heft.dashboard")
+
+Batch = list[tuple[str, object, float, int]]
+"""``(key, message, arrival on the monotonic clock (s), arrival (ns since the epoch))``."""
+Sink = Callable[[Batch], None]
+LivelinessSink = Callable[[int, bool, float], None]
+
+
+def display_keys(keys: Keys) -> list[str]:
+    """What a display subscribes to: the estimates, statuses, bridges and commands of every
+    robot, each robot's shares (the links' health), the plant's truth and status, the control
+    key. Not the measurements or the clock, the bulk of a team's traffic."""
+    return [
+        keys.all_estimates(),
+        keys.all_statuses(),
+        keys.all_bridges(),
+        keys.all_forces(),
+        keys.truth(),
+        keys.plant_status(),
+        keys.control(),
+        *(keys.share(i) for i in range(1, MAX_ROBOTS + 1)),
+    ]
+
+
+def everything(keys: Keys) -> list[str]:
+    """What a recorder subscribes to: every key of the team."""
+    return [team_wildcard(keys)]
+
+
+class LiveFeed:
+    """Subscribes to ``subscriptions`` of ``keys``' team and feeds ``sinks``; :meth:`start`,
+    then :meth:`close`. ``liveliness`` (if given) hears the agents' tokens come and go."""
+
+    def __init__(
+        self,
+        settings: ZenohSettings,
+        keys: Keys,
+        sinks: Sequence[Sink],
+        subscriptions: Sequence[str] | None = None,
+        liveliness: LivelinessSink | None = None,
+        session=None,
+    ):
+        self.settings = settings
+        self.keys = keys
+        self.sinks = list(sinks)
+        self.subscriptions = list(subscriptions or display_keys(keys))
+        self.on_liveliness = liveliness
+        self.rejects = RejectLog(LOG, "dashboard")
+        self.overflow = 0
+        """Messages dropped undecoded because the inbox was full (logged by the worker)."""
+        self._overflow_logged = 0
+        self.failures = 0
+        self._inbox: deque = deque()
+        self._session = session
+        self._own_session = session is None
+        self._subscribers: list = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="dashboard-feed", daemon=True)
+
+    def start(self) -> LiveFeed:
+        """Open the session (:class:`~agent.zenoh_session.SessionError` if Zenoh cannot) and
+        subscribe; the worker starts at once."""
+        if self._session is None:
+            self._session = open_session(self.settings)
+        put = self._put
+        for key in self.subscriptions:
+            self._subscribers.append(
+                self._session.declare_subscriber(
+                    key, lambda s: put(str(s.key_expr), s.payload.to_bytes())
+                )
+            )
+        if self.on_liveliness is not None:
+            inbox = self._inbox
+            self._subscribers.append(
+                watch_liveliness(
+                    self._session,
+                    self.keys.all_alive(),
+                    lambda key, alive: inbox.append((key, alive, time.monotonic(), 0)),
+                )
+            )
+        self._thread.start()
+        return self
+
+    def _put(self, key: str, payload: bytes) -> None:
+        """Zenoh's callback: tiny, no decoding here."""
+        if len(self._inbox) >= INBOX:
+            self.overflow += 1
+            return
+        self._inbox.append((key, payload, time.monotonic(), time.time_ns()))
+
+    def _run(self) -> None:
+        while not self._stop.wait(POLL_S):
+            self._drain_safely()
+        self._drain_safely()
+
+    def _drain_safely(self) -> None:
+        """:meth:`drain`, never ending the worker: a failure is logged and counted."""
+        try:
+            self.drain()
+        except Exception:  # noqa: BLE001 - a display must outlive one bad batch
+            self.failures += 1
+            if self.failures <= 10:
+                LOG.exception("dashboard: a batch of messages could not be handled")
+
+    def drain(self) -> None:
+        """Decode what has arrived and hand it to the sinks (the worker does it every
+        :data:`POLL_S`)."""
+        batch: Batch = []
+        inbox = self._inbox
+        for _ in range(len(inbox)):
+            key, payload, arrived, stamp = inbox.popleft()
+            if isinstance(payload, bool):  # a liveliness token came or went
+                self._liveliness(key, payload, arrived)
+                continue
+            try:
+                message = decode_on(self.keys, key, payload)
+            except DecodeError as err:
+                self.rejects(key.rsplit("/", 1)[-1], err)
+                continue
+            batch.append((key, message, arrived, stamp))
+        if self.overflow > self._overflow_logged:
+            LOG.warning("dashboard: inbox full, %d message(s) dropped so far", self.overflow)
+            self._overflow_logged = self.overflow
+        if batch:
+            for sink in self.sinks:
+                sink(batch)
+
+    def _liveliness(self, key: str, alive: bool, arrived: float) -> None:
+        try:
+            robot = Keys.robot_of(key)
+            ours = key == self.keys.alive(robot)
+        except (DecodeError, ValueError) as err:
+            self.rejects("liveliness", err)
+            return
+        if ours and self.on_liveliness is not None:
+            self.on_liveliness(robot, alive, arrived)
+
+    def close(self) -> None:
+        """Stop the worker, undeclare and close the session (if this feed opened it)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+        for subscriber in self._subscribers:
+            try:
+                subscriber.undeclare()
+            except Exception:  # noqa: BLE001 - the session may be gone already
+                pass
+        self._subscribers.clear()
+        if self._own_session and self._session is not None:
+            self._session.close()
+            self._session = None

@@ -1,0 +1,470 @@
+// The team dashboard's page: a WebSocket of frames from the server (dashboard/app.py) drawn
+// with Plotly (served by the app from the installed plotly package).
+//
+// Memory is bounded: every chart trace keeps at most MAX_POINTS points (Plotly's maxPoints),
+// and the points that arrive while the charts are paused wait in buffers of the same bound.
+"use strict";
+
+const MAX_POINTS = 3000;
+const CHART_EVERY_MS = 100; // time charts redraw at most 10 times a second
+const SCENE_EVERY_MS = 200; // top view and table at most 5 times a second
+const SLOW_EVERY_MS = 1000; // graph and timeline: on a change, else once a second
+const RECEIPTS = 5000; // frames' arrival times and redraw times kept, for measurements
+
+// 16 hues that stay apart on a dark background; robots 17..32 reuse them dashed.
+const COLOURS = [
+  "#4e9bff", "#ff6b6b", "#5fd35f", "#ffb020", "#c77dff", "#2ee6d6", "#ff85c8", "#e8e85a",
+  "#b08060", "#a8b3c2", "#8a6cff", "#ff8f5a", "#2fa37a", "#f0c0ff", "#d0383a", "#1e90b0",
+];
+const PHASE_COLOURS = {
+  excite: "#4e9bff", inertia: "#c77dff", push: "#ffb020", done: "#3fb950", halted: "#f85149",
+};
+const HEALTH_COLOURS = {
+  ok: "#3fb950", late: "#d29922", silent: "#f85149", lost: "#f85149", ended: "#6e7681",
+};
+const TRUTH_COLOUR = "#f0f3f6";
+const PLOT_CONFIG = { displaylogo: false, responsive: true, scrollZoom: true,
+  modeBarButtonsToRemove: ["select2d", "lasso2d", "toImage"] };
+
+function colour(robot) { return COLOURS[(robot - 1) % COLOURS.length]; }
+function dash(robot) { return robot > COLOURS.length ? "dash" : "solid"; }
+function token() { return new URLSearchParams(location.search).get("token"); }
+function fmt(value, digits) {
+  return value === null || value === undefined ? "–" : Number(value).toFixed(digits);
+}
+
+function baseLayout(extra) {
+  return Object.assign({
+    paper_bgcolor: "rgba(0,0,0,0)", plot_bgcolor: "rgba(0,0,0,0)",
+    font: { color: "#d8dde6", size: 11 },
+    margin: { l: 48, r: 8, t: 6, b: 28 },
+    showlegend: false, uirevision: "keep", hovermode: "closest",
+    xaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150", title: { text: "t (s)", standoff: 2 } },
+    yaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150" },
+  }, extra || {});
+}
+
+// ------------------------------------------------------------------------ time charts
+class TimeChart {
+  constructor(id, quantity, describe) {
+    this.div = document.getElementById(id);
+    this.quantity = quantity; // trace ids are QUANTITY/...
+    this.describe = describe; // trace id -> {name, colour, dash}
+    this.reset();
+  }
+  reset() {
+    this.index = new Map(); // trace id -> Plotly trace index
+    this.pending = new Map(); // trace id -> {x: [], y: []}
+    this.last = new Map(); // trace id -> newest t
+    this.shapes = "";
+    Plotly.newPlot(this.div, [], baseLayout(), PLOT_CONFIG);
+  }
+  add(trace, points) {
+    let last = this.last.has(trace) ? this.last.get(trace) : -Infinity;
+    let buffer = this.pending.get(trace);
+    if (!buffer) { buffer = { x: [], y: [] }; this.pending.set(trace, buffer); }
+    for (const [t, y] of points) {
+      if (t <= last) continue; // already drawn (a hello and a frame may overlap)
+      buffer.x.push(t); buffer.y.push(y); last = t;
+    }
+    if (buffer.x.length > MAX_POINTS) {
+      buffer.x.splice(0, buffer.x.length - MAX_POINTS);
+      buffer.y.splice(0, buffer.y.length - MAX_POINTS);
+    }
+    this.last.set(trace, last);
+  }
+  flush() {
+    const fresh = [], extendIdx = [], xs = [], ys = [];
+    for (const [trace, buffer] of this.pending) {
+      if (!buffer.x.length) continue;
+      if (!this.index.has(trace)) {
+        const look = this.describe(trace);
+        this.index.set(trace, this.index.size);
+        fresh.push({ type: "scatter", mode: "lines", name: look.name, x: buffer.x, y: buffer.y,
+          line: { color: look.colour, width: look.width || 1.6, dash: look.dash || "solid" },
+          hovertemplate: `${look.name}: %{y:.5g} at t = %{x:.2f} s<extra></extra>` });
+      } else {
+        extendIdx.push(this.index.get(trace)); xs.push(buffer.x); ys.push(buffer.y);
+      }
+    }
+    this.pending = new Map();
+    if (fresh.length) Plotly.addTraces(this.div, fresh);
+    if (extendIdx.length) Plotly.extendTraces(this.div, { x: xs, y: ys }, extendIdx, MAX_POINTS);
+  }
+  setShapes(shapes) {
+    const key = JSON.stringify(shapes);
+    if (key === this.shapes) return;
+    this.shapes = key;
+    Plotly.relayout(this.div, { shapes: shapes });
+  }
+  visible() {
+    // [trace name, t, value] of the points inside the current x range
+    const range = this.div.layout && this.div.layout.xaxis && !this.div.layout.xaxis.autorange
+      ? this.div.layout.xaxis.range : null;
+    const rows = [];
+    for (const trace of this.div.data || []) {
+      for (let k = 0; k < trace.x.length; k++) {
+        const t = trace.x[k];
+        if (range && (t < range[0] || t > range[1])) continue;
+        rows.push([trace.name, t, trace.y[k]]);
+      }
+    }
+    return rows;
+  }
+}
+
+function robotTrace(label) {
+  return (trace) => {
+    const who = trace.split("/")[1];
+    if (who === "truth") return { name: `${label} (truth)`, colour: TRUTH_COLOUR, dash: "dash", width: 1.2 };
+    const robot = Number(who);
+    return { name: `${label} robot ${robot}`, colour: colour(robot), dash: dash(robot) };
+  };
+}
+function edgeTrace(trace) {
+  const [, pair, truth] = trace.split("/");
+  const [i, j] = pair.split("-").map(Number);
+  if (truth) return { name: `‖z${i}${j}‖ (truth)`, colour: colour(i), dash: "dot", width: 1 };
+  return { name: `‖ẑ${i}${j}‖ robot ${i}`, colour: colour(i), dash: dash(i) };
+}
+
+const charts = {
+  mass: new TimeChart("chart-mass", "mass", robotTrace("m̂")),
+  moment: new TimeChart("chart-moment", "moment", robotTrace("Ĵ")),
+  edge: new TimeChart("chart-edge", "edge", edgeTrace),
+  com: new TimeChart("chart-com", "com", robotTrace("‖ẑC‖")),
+  omega: new TimeChart("chart-omega", "omega", robotTrace("ω")),
+};
+
+// ------------------------------------------------------------------------ the page's state
+const heft = {
+  scene: null, epoch: null, paused: false, frames: 0, receipts: [], charts: charts,
+  lastShape: "", wake: null, socket: null,
+  chartMs: [], sceneMs: [], // how long each redraw took (ms), the newest RECEIPTS
+};
+window.heft = heft;
+
+function takePoints(points) {
+  for (const [trace, list] of Object.entries(points)) {
+    const chart = charts[trace.split("/")[0]];
+    if (chart) chart.add(trace, list);
+  }
+}
+
+function switchLines(scene) {
+  const shapes = [];
+  for (const [phase, t] of Object.entries(scene.switches || {})) {
+    if (phase === "excite") continue;
+    shapes.push({ type: "line", yref: "paper", y0: 0, y1: 1, x0: t, x1: t,
+      line: { color: PHASE_COLOURS[phase] || "#888", width: 1, dash: "dot" } });
+  }
+  return shapes;
+}
+
+function drawSwitches(scene) {
+  const shapes = switchLines(scene);
+  for (const chart of Object.values(charts)) chart.setShapes(shapes);
+}
+
+// ------------------------------------------------------------------------ the phase timeline
+function drawTimeline(scene) {
+  const byPhase = {};
+  const now = scene.t;
+  const robots = Object.keys(scene.robots).map(Number).sort((a, b) => a - b);
+  for (const robot of robots) {
+    const segments = scene.robots[robot].segments;
+    segments.forEach(([phase, start], k) => {
+      const end = k + 1 < segments.length ? segments[k + 1][1] : Math.max(now, start);
+      const bar = byPhase[phase] || (byPhase[phase] = { x: [], base: [], y: [] });
+      bar.base.push(start); bar.x.push(Math.max(end - start, now * 0.002 + 1e-3));
+      bar.y.push(`robot ${robot}`);
+    });
+  }
+  const data = scene.phases.filter((p) => byPhase[p]).map((phase) => ({
+    type: "bar", orientation: "h", name: phase, base: byPhase[phase].base,
+    x: byPhase[phase].x, y: byPhase[phase].y, marker: { color: PHASE_COLOURS[phase] },
+    hovertemplate: `${phase} from %{base:.2f} s<extra>%{y}</extra>`,
+  }));
+  Plotly.react("chart-phases", data, baseLayout({
+    barmode: "overlay", showlegend: true, legend: { orientation: "h", y: 1.12, x: 0 },
+    margin: { l: 64, r: 8, t: 18, b: 28 },
+    yaxis: { autorange: "reversed", gridcolor: "#2a2f3a" },
+    shapes: switchLines(scene),
+  }), PLOT_CONFIG);
+}
+
+// ------------------------------------------------------------------------ the top view
+function drawTop(scene) {
+  const top = scene.top;
+  document.getElementById("top-source").textContent = top
+    ? (top.source === "truth" ? "world frame, truth and estimates" : "about p_G, estimates only") : "";
+  if (!top) return;
+  const data = [], annotations = [];
+  if (top.outline) {
+    const xs = top.outline.map((p) => p[0]), ys = top.outline.map((p) => p[1]);
+    xs.push(xs[0]); ys.push(ys[0]);
+    data.push({ type: "scatter", mode: "lines", name: "load", x: xs, y: ys, fill: "toself",
+      fillcolor: "rgba(120,130,150,0.18)", line: { color: "#8a93a3", width: 1.5 }, hoverinfo: "skip" });
+  }
+  const contacts = top.contacts.map((p, k) => ({ p, robot: k + 1 })).filter((c) => c.p);
+  data.push({ type: "scatter", mode: "markers+text", name: "contacts",
+    x: contacts.map((c) => c.p[0]), y: contacts.map((c) => c.p[1]),
+    text: contacts.map((c) => String(c.robot)), textposition: "top center",
+    marker: { size: 10, color: contacts.map((c) => colour(c.robot)), line: { color: "#000", width: 1 } },
+    hovertemplate: "contact %{text}: (%{x:.3f}, %{y:.3f})<extra></extra>" });
+  const estimates = Object.entries(top.com_estimates || {});
+  data.push({ type: "scatter", mode: "markers", name: "COM estimates",
+    x: estimates.map(([, p]) => p[0]), y: estimates.map(([, p]) => p[1]),
+    text: estimates.map(([r]) => r),
+    marker: { size: 9, symbol: "circle-open", line: { width: 2 },
+      color: estimates.map(([r]) => colour(Number(r))) },
+    hovertemplate: "robot %{text}'s p̂_C: (%{x:.3f}, %{y:.3f})<extra></extra>" });
+  if (top.com) {
+    data.push({ type: "scatter", mode: "markers", name: "COM (truth)", x: [top.com[0]], y: [top.com[1]],
+      marker: { size: 13, symbol: "x-thin", line: { width: 2.5, color: TRUTH_COLOUR } },
+      hovertemplate: "p_C (truth): (%{x:.3f}, %{y:.3f})<extra></extra>" });
+  }
+  const scale = 0.1; // metres per newton
+  for (const [robot, force] of Object.entries(top.forces || {})) {
+    const c = top.contacts[Number(robot) - 1];
+    if (!c || Math.hypot(force[0], force[1]) < 1e-6) continue;
+    annotations.push({ x: c[0] + scale * force[0], y: c[1] + scale * force[1], ax: c[0], ay: c[1],
+      xref: "x", yref: "y", axref: "x", ayref: "y", showarrow: true, arrowhead: 2,
+      arrowsize: 1, arrowwidth: 2, arrowcolor: colour(Number(robot)), text: "" });
+  }
+  Plotly.react("top", data, baseLayout({
+    margin: { l: 36, r: 8, t: 6, b: 24 }, uirevision: "top", annotations: annotations,
+    xaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150" },
+    yaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150", scaleanchor: "x", scaleratio: 1 },
+  }), PLOT_CONFIG);
+}
+
+// ------------------------------------------------------------------------ the graph
+function drawGraph(scene) {
+  const n = scene.n || Object.keys(scene.robots).length;
+  if (!n) return;
+  const at = (i) => [Math.cos(Math.PI / 2 - (2 * Math.PI * (i - 1)) / n),
+    Math.sin(Math.PI / 2 - (2 * Math.PI * (i - 1)) / n)];
+  const data = [], annotations = [];
+  for (const link of scene.links) {
+    const [i, j] = link.edge, a = at(i), b = at(j);
+    const info = `${i}–${j}: ${link.health}, age ${link.age_s === null ? "–" : link.age_s.toFixed(2) + " s"}, ${link.rate_hz} msg/s`;
+    data.push({ type: "scatter", mode: "lines", x: [a[0], b[0]], y: [a[1], b[1]],
+      line: { color: HEALTH_COLOURS[link.health] || "#888", width: 3 }, hoverinfo: "text", text: info });
+    if (scene.links.length <= 12) {
+      annotations.push({ x: (a[0] + b[0]) / 2, y: (a[1] + b[1]) / 2, showarrow: false,
+        text: `${link.age_s === null ? "–" : link.age_s.toFixed(2)} s · ${link.rate_hz}/s`,
+        font: { size: 10, color: HEALTH_COLOURS[link.health] || "#888" }, bgcolor: "rgba(17,19,24,0.8)" });
+    }
+  }
+  const ids = Array.from({ length: n }, (_, k) => k + 1);
+  const lost = new Set();
+  for (const alarm of scene.alarms) {
+    const m = /robot\(s\) \[([\d, ]+)\] lost/.exec(alarm.text);
+    if (m) m[1].split(",").forEach((r) => lost.add(Number(r)));
+  }
+  data.push({ type: "scatter", mode: "markers+text", x: ids.map((i) => at(i)[0]), y: ids.map((i) => at(i)[1]),
+    text: ids.map(String), textfont: { color: "#0c0e12", size: 11 },
+    marker: { size: 24, color: ids.map(colour), line: { width: 3, color: ids.map((i) => (lost.has(i) ? "#f85149" : "#0c0e12")) } },
+    hovertemplate: "robot %{text}<extra></extra>" });
+  Plotly.react("graph", data, baseLayout({
+    margin: { l: 4, r: 4, t: 4, b: 4 }, annotations: annotations, uirevision: "graph",
+    xaxis: { visible: false, range: [-1.35, 1.35] },
+    yaxis: { visible: false, range: [-1.25, 1.25], scaleanchor: "x" },
+  }), { displayModeBar: false, responsive: true });
+}
+
+// ------------------------------------------------------------------------ the table
+function drawTable(scene) {
+  const table = scene.table;
+  const title = document.getElementById("table-title");
+  title.innerHTML = table.final
+    ? `<span class="final">final</span> estimates against truth (t = ${fmt(table.t, 2)} s)`
+    : "latest estimates against truth";
+  const rows = [`<tr><th>robot</th><th>phase</th><th>m̂ kg</th><th>Ĵ kg m²</th>`
+    + `<th title="|m̂ − m| / m">m %</th><th title="|Ĵ − J| / J">J %</th>`
+    + `<th title="‖(p̂_C − p_Ci) − (p_C − p_Ci)‖">c mm</th><th title="max_j ‖ẑ_ij − z_ij‖">z mm</th></tr>`];
+  for (const [robot, row] of Object.entries(table.robots)) {
+    const e = row.errors || {};
+    const c = row.contact_to_com ? `p̂_C − p_C${robot} = (${fmt(row.contact_to_com[0], 4)}, ${fmt(row.contact_to_com[1], 4)}) m` : "";
+    rows.push(`<tr title="${c}"><td><span class="swatch" style="background:${colour(Number(robot))}"></span>${robot}</td>`
+      + `<td style="color:${PHASE_COLOURS[row.phase] || "inherit"}">${row.phase}</td>`
+      + `<td>${fmt(row.mass, 4)}</td><td>${fmt(row.moment, 4)}</td>`
+      + `<td>${fmt(e.mass_pct, 3)}</td><td>${fmt(e.moment_pct, 3)}</td>`
+      + `<td>${fmt(e.contact_to_com_mm, 2)}</td><td>${fmt(e.z_ij_mm, 2)}</td></tr>`);
+  }
+  if (table.truth) {
+    rows.push(`<tr class="truth"><td>truth</td><td></td><td>${fmt(table.truth.mass, 4)}</td>`
+      + `<td>${fmt(table.truth.moment, 4)}</td><td colspan="4"></td></tr>`);
+  }
+  document.getElementById("table").innerHTML = rows.join("");
+}
+
+// ------------------------------------------------------------------------ header and alarms
+function drawHeader(scene, source) {
+  document.getElementById("team").textContent = scene.team ? `team ${scene.team}` : "";
+  document.getElementById("clock").textContent = `t = ${fmt(scene.t, 2)} s`;
+  const badge = document.getElementById("source");
+  if (source.mode === "replay") {
+    const speed = source.speed === 0 ? "max" : `${source.speed}×`;
+    badge.textContent = `REPLAY ${speed}${source.paused ? " · paused" : ""}${source.finished ? " · end" : ""}`
+      + ` · ${fmt(source.position_s, 1)} s`;
+    badge.className = "badge replay";
+  } else {
+    badge.textContent = "LIVE";
+    badge.className = "badge live";
+  }
+  document.getElementById("replay-controls").hidden = !source.recording;
+  document.getElementById("replay-toggle").textContent = source.paused ? "▶" : "❚❚";
+  const phases = {};
+  for (const [robot, view] of Object.entries(scene.robots)) {
+    if (view.phase) (phases[view.phase] = phases[view.phase] || []).push(robot);
+  }
+  const names = Object.keys(phases);
+  const chip = document.getElementById("team-phase");
+  chip.textContent = names.length === 1 ? names[0] : names.map((p) => `${p} ${phases[p].join(",")}`).join(" · ") || "–";
+  chip.style.background = names.length === 1 ? PHASE_COLOURS[names[0]] + "55" : "";
+  const box = document.getElementById("alarms");
+  box.hidden = !scene.alarms.length;
+  box.innerHTML = scene.alarms.map((a) => `<div class="alarm ${a.level}">⚠ ${a.text}</div>`).join("");
+}
+
+// ------------------------------------------------------------------------ drawing
+// One drawing job per animation frame, the most overdue first: a page never blocks for longer
+// than its slowest job (so frames keep arriving on time), and each job waits at least BUDGET
+// times its own last duration before it runs again (a big team's charts redraw less often
+// rather than starve the page).
+const BUDGET = 4;
+const jobs = [
+  ...Object.entries(charts).map(([name, chart]) => ({
+    name, every: CHART_EVERY_MS, chart: true, run: () => chart.flush() })),
+  { name: "top", every: SCENE_EVERY_MS, run: () => drawTop(heft.scene) },
+  { name: "table", every: SCENE_EVERY_MS, run: () => drawTable(heft.scene) },
+  { name: "switches", every: SLOW_EVERY_MS, run: () => drawSwitches(heft.scene) },
+  { name: "timeline", every: SLOW_EVERY_MS, changes: true, run: () => drawTimeline(heft.scene) },
+  { name: "graph", every: SLOW_EVERY_MS, changes: true, run: () => drawGraph(heft.scene) },
+];
+for (const job of jobs) { job.last = -Infinity; job.took = 0; }
+
+function sceneShape(scene) {
+  return JSON.stringify([scene.switches, scene.links.map((l) => l.health),
+    Object.values(scene.robots).map((r) => r.segments.length), scene.alarms.length]);
+}
+
+function render(force) {
+  const now = performance.now();
+  if (!heft.scene) return;
+  drawHeader(heft.scene, heft.source);
+  if (heft.paused) return;
+  const shape = sceneShape(heft.scene);
+  const changed = shape !== heft.lastShape;
+  heft.lastShape = shape;
+  let next = null, wait = Infinity;
+  for (const job of jobs) {
+    if (force || (changed && job.changes)) job.last = -Infinity;
+    const due = job.last + Math.max(job.every, BUDGET * job.took);
+    if (due <= now && (!next || due < next.due)) next = Object.assign(job, { due });
+    else if (due > now) wait = Math.min(wait, due - now);
+  }
+  if (next) {
+    const started = performance.now();
+    next.run();
+    next.took = performance.now() - started;
+    next.last = started;
+    (next.chart ? heft.chartMs : heft.sceneMs).push(next.took);
+    schedule();
+  } else if (wait < Infinity) {
+    clearTimeout(heft.wake);
+    heft.wake = setTimeout(schedule, wait);
+  }
+}
+let scheduled = false;
+function schedule() {
+  if (scheduled) return;
+  scheduled = true;
+  requestAnimationFrame(() => { scheduled = false; render(false); });
+}
+
+function onMessage(event) {
+  const message = JSON.parse(event.data);
+  heft.frames += 1;
+  heft.receipts.push([Date.now(), message.sent_ms || null,
+    message.scene ? Object.fromEntries(Object.entries(message.scene.robots).map(([r, v]) => [r, v.tick])) : null]);
+  for (const ring of [heft.receipts, heft.chartMs, heft.sceneMs]) {
+    if (ring.length > RECEIPTS) ring.splice(0, ring.length - RECEIPTS);
+  }
+  if (message.type === "hello") {
+    if (heft.epoch !== null && message.epoch !== heft.epoch) {
+      for (const chart of Object.values(charts)) chart.reset();
+    }
+    heft.epoch = message.epoch;
+    takePoints(message.series);
+  } else if (message.epoch !== heft.epoch) {
+    heft.socket.close(); // a new replay: reconnect for its hello
+    return;
+  } else {
+    takePoints(message.points);
+  }
+  heft.scene = message.scene;
+  heft.source = message.source;
+  schedule();
+}
+
+function connect() {
+  const base = location.pathname.replace(/[^/]*$/, "");
+  const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${base}ws${location.search}`;
+  const socket = new WebSocket(url);
+  heft.socket = socket;
+  socket.onmessage = onMessage;
+  socket.onclose = () => {
+    const badge = document.getElementById("source");
+    badge.textContent = "disconnected: retrying";
+    badge.className = "badge down";
+    setTimeout(connect, 1000);
+  };
+}
+
+// ------------------------------------------------------------------------ controls
+function exportCsv() {
+  const lines = ["chart,trace,t_s,value"];
+  for (const [name, chart] of Object.entries(charts)) {
+    for (const [trace, t, value] of chart.visible()) lines.push(`${name},"${trace}",${t},${value}`);
+  }
+  return lines.join("\n") + "\n";
+}
+heft.csv = exportCsv;
+
+document.getElementById("pause").onclick = (event) => {
+  heft.paused = !heft.paused;
+  event.target.textContent = heft.paused ? "▶ resume" : "❚❚ pause";
+  event.target.classList.toggle("active", heft.paused);
+  if (!heft.paused) { for (const job of jobs) job.last = -Infinity; schedule(); }
+};
+document.getElementById("export").onclick = () => {
+  const blob = new Blob([exportCsv()], { type: "text/csv" });
+  const a = document.createElement("a");
+  a.href = URL.createObjectURL(blob);
+  a.download = `heft-${heft.scene ? heft.scene.team : "team"}-${new Date().toISOString().slice(0, 19)}.csv`;
+  a.click();
+  setTimeout(() => URL.revokeObjectURL(a.href), 1000);
+};
+
+async function replay(body) {
+  const headers = { "Content-Type": "application/json" };
+  if (token()) headers["X-Heft-Token"] = token();
+  const response = await fetch("api/replay", { method: "POST", headers, body: JSON.stringify(body) });
+  if (!response.ok) {
+    const reason = await response.json().catch(() => ({ detail: response.statusText }));
+    alert(`replay: ${typeof reason.detail === "string" ? reason.detail : JSON.stringify(reason.detail)}`);
+  }
+}
+const speedOf = () => Number(document.getElementById("replay-speed").value);
+document.getElementById("replay-restart").onclick = () => replay({ action: "restart", speed: speedOf() });
+document.getElementById("replay-toggle").onclick = () =>
+  replay(heft.source && heft.source.paused ? { action: "play", speed: speedOf() } : { action: "pause" });
+document.getElementById("replay-step").onclick = () => replay({ action: "step", seconds: 0.5 });
+document.getElementById("replay-speed").onchange = () => {
+  if (heft.source && heft.source.mode === "replay" && !heft.source.paused) replay({ action: "play", speed: speedOf() });
+};
+
+connect();
