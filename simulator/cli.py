@@ -409,6 +409,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from agent.config import Bound
     from simulator.benchmark import DEFAULT_REPEAT, PAPER_SCENARIO, format_report, run_benchmark
 
+    if args.dashboard:
+        if args.can:
+            raise UsageError("--dashboard and --can are two benchmarks: run one at a time")
+        from dashboard.benchmark import main as bench_dashboard
+
+        return bench_dashboard([])  # 16 robots at 100 Hz, 3 browsers, then a 10x replay
     if args.can:
         return _bench_can(args)
     for option in ("channel", "seconds", "period_ms"):
@@ -784,6 +790,13 @@ def _add_bench(commands: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--channel", metavar="NAME", help="with --can: the vcan interface (default: vcan8)"
+    )
+    parser.add_argument(
+        "--dashboard",
+        action="store_true",
+        help="instead: the dashboard's benchmark: 16 agents publishing estimates at 100 Hz into"
+        " it with 3 browsers (CPU, publish-to-browser latency p50/p99), then its memory over a"
+        " 10-minute recording replayed at 10x",
     )
     parser.add_argument(
         "--seconds",
