@@ -48,11 +48,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+import zenoh
+
 from agent.children import Child, describe_exit, free_port, stop_all, wait_all
 from agent.config import to_toml
 from agent.faults import FaultSettings
 from agent.node import AgentNodeConfig
-from agent.process import EventQueue, RejectLog
+from agent.process import RejectLog
 from agent.protocol import (
     BridgeStatus,
     Control,
@@ -87,7 +89,14 @@ its stop in a way that a signal landing on one of Zenoh's threads does not alway
 HALT_GRACE_S = 0.5
 FINAL_GRACE_S = 2.0
 """Messages from different processes cross: an instant after the final one may be complete
-before the final one is. The run waits this long for the final instant itself."""
+before the final one is. The run waits at least this long for the final instant itself, and
+at least :data:`FINAL_GRACE_TICKS` ticks' worth of wall time at the run's pace (a slow machine
+delays messages by more than 2 s)."""
+FINAL_GRACE_TICKS = 50
+FIFO_CAPACITY = 1 << 16
+"""Messages each of the launcher's subscriptions holds before its reception waits."""
+POLL_S = 0.002
+"""How often :meth:`Collector.drain` looks at its subscriptions while they are empty."""
 AGENT_GONE_S = 3.0
 """An agent process that exited mid-run: how long its neighbours have to halt the team before
 the launcher names it lost itself (they notice a dead process at once, a hung one after the
@@ -170,12 +179,17 @@ class Collector:
 
     The final instant is decided by the team's state, not by message timing: it is the first
     instant at which every robot is done, ``max_i phase_since_i`` over the robots' ``done``
-    estimates — the instant the in-process run ends at."""
+    estimates — the instant the in-process run ends at.
+
+    Each subscription queues in Zenoh's own FIFO (:data:`FIFO_CAPACITY`), emptied by
+    :meth:`drain`: reception never waits for this process's interpreter, so a launcher slowed
+    down by its machine does not make the router drop what it says to it (with a Python
+    callback per message, a loaded test machine once ended a lockstep run an instant late:
+    what the team said of its final instant had not arrived)."""
 
     def __init__(self, session, keys: Keys, n: int, record_every: int):
         self.n = n
         self.record_every = record_every
-        self.events = EventQueue()
         self.rejects = RejectLog(LOG, "launcher")
         self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
         self.truths: dict[int, Truth] = {}
@@ -202,19 +216,34 @@ class Collector:
         self.halted_at = 0.0
         self.finished_at: float | None = None
         self._subscribers = [
+            self._subscribe(session, keys.truth(), Truth),
             self._subscribe(session, keys.all_estimates(), Estimates),
             self._subscribe(session, keys.all_statuses(), Status),
-            self._subscribe(session, keys.truth(), Truth),
             self._subscribe(session, keys.plant_status(), PlantStatus),
             self._subscribe(session, keys.all_bridges(), BridgeStatus),
         ]
 
     def _subscribe(self, session, key: str, kind: type):
-        put = self.events.put
-        return session.declare_subscriber(key, lambda s: put((kind, s.payload.to_bytes())))
+        return kind, session.declare_subscriber(key, zenoh.handlers.FifoChannel(FIFO_CAPACITY))
 
     def drain(self, timeout: float) -> None:
-        self.events.drain(lambda event: self._handle(*event), timeout)
+        """Handle what has arrived, waiting up to ``timeout`` for something to: the truth
+        first, then what the robots, the plant and the bridges said; each subscription up to
+        what it held when it was reached."""
+        deadline = time.monotonic() + timeout
+        while True:
+            handled = 0
+            for kind, subscriber in self._subscribers:
+                for _ in range(FIFO_CAPACITY):
+                    sample = subscriber.try_recv()
+                    if sample is None:
+                        break
+                    self._handle(kind, sample.payload.to_bytes())
+                    handled += 1
+            left = deadline - time.monotonic()
+            if handled or left <= 0:
+                return
+            time.sleep(min(POLL_S, left))
 
     def _handle(self, kind: type, payload: bytes) -> None:
         if self._finished and kind not in (PlantStatus, BridgeStatus):
@@ -318,12 +347,19 @@ class Collector:
         now = time.perf_counter()
         halt_over = self.halted and now - self.halted_at > HALT_GRACE_S
         final = self.final is not None and (
-            self.final.truth.tick == self.done_instant or now - self.final_at > FINAL_GRACE_S
+            self.final.truth.tick == self.done_instant or now - self.final_at > self._grace_s()
         )
         self._finished = self._finished or halt_over or final
         if self._finished and self.finished_at is None:
             self.finished_at = time.perf_counter()
         return self._finished
+
+    def _grace_s(self) -> float:
+        """How long to wait for the final instant (see :data:`FINAL_GRACE_S`)."""
+        if self.first_truth_at is None or self.latest_tick <= 0:
+            return FINAL_GRACE_S
+        pace = (self.final_at - self.first_truth_at) / self.latest_tick  # wall s per tick
+        return max(FINAL_GRACE_S, FINAL_GRACE_TICKS * pace)
 
     def rejections(self) -> dict:
         """Messages rejected: by the launcher (by kind), the plant, and each robot's agent
@@ -339,7 +375,7 @@ class Collector:
         }
 
     def close(self) -> None:
-        for sub in self._subscribers:
+        for _, sub in self._subscribers:
             sub.undeclare()
 
 

@@ -51,6 +51,9 @@ SLOW_TICK_S = 2.0
 """Lockstep: a tick that waits this long for a command is logged (once)."""
 WAIT_S = 0.2
 """The longest the loop waits for something to arrive before it looks at its stop."""
+STATUS_EVERY_S = 1.0
+"""The plant's status goes out this often (wall clock) while it runs, besides at its start,
+its end and each robot lost: a plant killed before its end leaves its counters behind."""
 
 
 class PlantNode:
@@ -223,7 +226,7 @@ class PlantNode:
         log.info("all %d agents are up; starting", s.n)
         max_ticks = round(s.run.max_time_s / s.period_s)
         period = s.period_s / s.run.real_time_factor  # wall-clock seconds per tick
-        start = time.monotonic()
+        start = status_at = time.monotonic()
         while not self.stop.is_set() and self.plant.tick <= max_ticks:
             self._publish()
             if self.clock == "lockstep":
@@ -239,6 +242,9 @@ class PlantNode:
                     self.overruns += 1
             self._drain(0.0)
             self._apply()
+            if time.monotonic() - status_at >= STATUS_EVERY_S:
+                status_at = time.monotonic()
+                self.publish_status()
         log.info("plant stops at t = %.2f s (tick %d)", self.plant.time_s, self.plant.tick)
         self.publish_status()
         return 0

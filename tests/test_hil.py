@@ -8,6 +8,7 @@ from __future__ import annotations
 import collections
 import io
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -50,29 +51,34 @@ def _bus(channel: str):
 
 
 class Candump:
-    """Every frame on ``channel`` in candump's log format (``candump -L``), as python-can's
-    ``CanutilsLogWriter`` writes it, until :meth:`close`."""
+    """Every frame on ``channel`` in candump's log format (``candump -L``), written by
+    python-can's own logger (``python -m can.logger``) in a process of its own, until
+    :meth:`close`: a reader sharing this process's interpreter with the run's collector fell
+    behind its socket and lost frames in User-Mode Linux."""
 
     def __init__(self, channel: str, path: Path) -> None:
-        import can
-
-        self.bus = _bus(channel)
-        self.writer = can.CanutilsLogWriter(str(path), channel=channel)
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
-
-    def _run(self) -> None:
-        while not self.stop.is_set():
-            message = self.bus.recv(0.1)
-            if message is not None:
-                self.writer.on_message_received(message)
+        self.path = path
+        command = [sys.executable, "-m", "can.logger", "-i", "socketcan", "-c", channel]
+        self.process = subprocess.Popen(
+            command + ["-f", str(path)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        deadline = time.monotonic() + 120.0  # the file is opened once the bus is
+        while not path.exists():
+            if self.process.poll() is not None or time.monotonic() > deadline:
+                self.process.kill()
+                _, err = self.process.communicate()
+                raise AssertionError(f"can.logger on {channel} did not start: {err[-2000:]!r}")
+            time.sleep(0.1)
 
     def close(self) -> None:
-        self.stop.set()
-        self.thread.join(5)
-        self.writer.stop()
-        self.bus.shutdown()
+        self.process.send_signal(signal.SIGINT)  # it closes the log on KeyboardInterrupt
+        try:
+            self.process.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.communicate()
 
 
 # ------------------------------------------------------------------------------ whole runs
@@ -145,6 +151,7 @@ class Rig:
         self.frames: list = []  # (kernel timestamp, frame) of the bridge's frames
         self.stop = threading.Event()
         self.paused = threading.Event()
+        self.ticking = threading.Lock()
         self.bus = _bus(RIG_CHANNEL)
         self.lock = threading.Lock()
         self.threads = [
@@ -182,18 +189,22 @@ class Rig:
         due = time.monotonic()
         beats = 0
         while not self.stop.is_set():
-            if self.paused.is_set():
+            with self.ticking:  # a pause waits for the tick being sent
+                paused = self.paused.is_set()
+                if not paused:
+                    k = self.tick
+                    frames = [Sync(k), Odometry(1, k % 16, (0.1, 0.2))]
+                    frames.append(AppliedForce(1, k % 16, (3, 4)))
+                    if k % 10 == 0:
+                        frames.append(Heartbeat(1, beats % 16, 2))
+                        beats += 1
+                    for frame in frames:
+                        self.send(CODEC.encode(frame))
+                    self.tick = k + 1
+            if paused:
                 time.sleep(PERIOD)
                 due = time.monotonic()
                 continue
-            k = self.tick
-            frames = [Sync(k), Odometry(1, k % 16, (0.1, 0.2)), AppliedForce(1, k % 16, (3, 4))]
-            if k % 10 == 0:
-                frames.append(Heartbeat(1, beats % 16, 2))
-                beats += 1
-            for frame in frames:
-                self.send(CODEC.encode(frame))
-            self.tick = k + 1
             due += PERIOD
             time.sleep(max(0.0, due - time.monotonic()))
 
@@ -226,7 +237,8 @@ class Rig:
         """With the driver paused: the bridge's status once it has read ``frames_in`` frames,
         or once its count stopped growing."""
         self.paused.set()
-        time.sleep(2 * PERIOD)
+        with self.ticking:
+            pass
         return self.rig.settled_status(frames_in, timeout_s=60.0)
 
     def close(self) -> None:
@@ -252,7 +264,7 @@ def test_the_bridge_survives_its_interface_being_deleted_and_recreated(rig: Rig)
     time.sleep(1.0)
     subprocess.run(["ip", "link", "add", "dev", RIG_CHANNEL, "type", "vcan"], check=True)
     subprocess.run(["ip", "link", "set", RIG_CHANNEL, "up"], check=True)
-    after = rig.wait(lambda s: s.reopens == before.reopens + 1, 30, "the bus reopened")
+    after = rig.wait(lambda s: s.reopens > before.reopens, 30, "the bus reopened")
     resumed = rig.wait(lambda s: s.frames_out > after.frames_out + 50, 30, "commands flow again")
     print(f"\nvcan re-created: {resumed}")
     rig.rig.check()
@@ -277,7 +289,9 @@ def test_the_watchdog_commands_zero_force_when_the_agent_is_killed(rig: Rig) -> 
         f" (watchdog {WATCHDOG_MS} ms, period {PERIOD * 1e3:.0f} ms); {len(zeros)} zero frames"
         f" in the next {(max(zeros) - first_zero) * 1e3:.0f} ms"
     )
-    assert WATCHDOG_MS <= delay_ms <= WATCHDOG_MS + PERIOD * 1e3
+    # The bridge's watchdog starts when it hears the command, before the command's frame is
+    # written: by the frames' timestamps the zero can come up to one frame period early.
+    assert WATCHDOG_MS - PERIOD * 1e3 <= delay_ms <= WATCHDOG_MS + PERIOD * 1e3
     assert tripped.watchdog_trips >= 1
     rig.rig.start_agent()
     rig.wait(lambda s: not s.watchdog, 30, "commands are back")
@@ -288,8 +302,7 @@ def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(ri
     frames), in bursts of 100 as fast as this process sends them, between the driver's
     ticks: the bridge reads every frame, counts every refused one, misses no tick, and
     answers ticks all along. (100 000 such frames, counted reason by reason, are in
-    tests/test_bridge.py, on a virtual bus: in User-Mode Linux each frame costs the bridge
-    about 10 ms of the guest's one CPU.)"""
+    tests/test_bridge.py, on a virtual bus: User-Mode Linux took 11.7 s for these 2 000.)"""
     junk, _ = random_frames(2_000, seed=9, codec=CODEC)
     errors = sum(1 for m in junk if m.is_error_frame)
     bus_off = sum(1 for m in junk if m.is_error_frame and m.arbitration_id & CAN_ERR_BUSOFF)
@@ -302,7 +315,10 @@ def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(ri
         for message in junk[burst : burst + 100]:
             rig.send(message)
         time.sleep(5 * PERIOD)
-    after = rig.settled(before.frames_in + rig.sent - sent_before)
+    rig.paused.set()
+    with rig.ticking:  # no tick goes out from here: every frame sent is counted
+        sent = rig.sent
+    after = rig.settled(before.frames_in + sent - sent_before)
     wall = time.perf_counter() - started
     ticks = rig.tick - ticks_before
     answered = {f.counter for _, f in rig.frames if f.apply}
@@ -312,7 +328,7 @@ def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(ri
         f" {after.bus_errors - before.bus_errors} bus errors; {after}"
     )
     rig.paused.clear()
-    assert after.frames_in - before.frames_in == rig.sent - sent_before  # junk included
+    assert after.frames_in - before.frames_in == sent - sent_before  # junk included
     assert after.decode_errors - before.decode_errors == len(junk) - bus_off
     assert after.bus_errors - before.bus_errors == errors
     assert after.missed_ticks == before.missed_ticks
