@@ -40,71 +40,152 @@ def _type_name(tp: Any) -> str:
     )
 
 
-def coerce(value: Any, tp: Any, key: str) -> Any:
+Key = str | tuple
+"""Where a value is, for an error message: a name, or ``(parent, suffix)`` with a ``str``
+suffix (``.field``) or an ``int`` one (``[i]``); joined by :func:`_key` only when an error is
+raised, so that a value that is fine costs no string formatting."""
+
+
+def _key(key: Key) -> str:
+    suffixes = []
+    while isinstance(key, tuple):
+        key, suffix = key
+        suffixes.append(suffix if isinstance(suffix, str) else f"[{suffix}]")
+    return key + "".join(reversed(suffixes))
+
+
+def coerce(value: Any, tp: Any, key: Key) -> Any:
     """Check ``value`` against the annotation ``tp`` and convert it (lists become tuples)."""
+    return _coercer(tp)(value, key)
+
+
+Coercer = typing.Callable[[Any, Key], Any]
+
+
+@functools.cache
+def _coercer(tp: Any) -> Coercer:
+    """The function that checks and converts a value for the annotation ``tp``, built once
+    per annotation: every decoded JSON message goes through these, field by field."""
     if dataclasses.is_dataclass(tp):
-        return from_table(tp, value, key)
+        return lambda value, key: _from_table(tp, value, key)
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        names = [m.name.lower() for m in tp]
-        if not isinstance(value, str) or value not in names:
-            raise ConfigError(f"{key}: expected one of {', '.join(names)}, got {value!r}")
-        return tp[value.upper()]
+        return _enum_coercer(tp)
     origin = typing.get_origin(tp)
     if origin is dict:
-        key_type, value_type = typing.get_args(tp)
+        return _dict_coercer(*typing.get_args(tp))
+    if origin in (typing.Union, types.UnionType):
+        return _union_coercer(tp)
+    if origin is tuple:
+        return _tuple_coercer(tp)
+    scalar = _SCALARS.get(tp)
+    if scalar is None:
+        raise TypeError(f"unsupported annotation {tp!r}")
+    return scalar
+
+
+def _enum_coercer(tp: type[enum.Enum]) -> Coercer:
+    names = {m.name.lower(): m for m in tp}
+
+    def check(value: Any, key: Key) -> Any:
+        if isinstance(value, str) and value in names:
+            return names[value]
+        raise ConfigError(f"{_key(key)}: expected one of {', '.join(names)}, got {value!r}")
+
+    return check
+
+
+def _dict_coercer(key_type: Any, value_type: Any) -> Coercer:
+    item = _coercer(value_type)
+
+    def check(value: Any, key: Key) -> Any:
         if not isinstance(value, dict):
-            raise ConfigError(f"{key}: expected a table, got {value!r}")
+            raise ConfigError(f"{_key(key)}: expected a table, got {value!r}")
         out = {}
         for k, v in value.items():
             if key_type is int:
                 if not (isinstance(k, str) and k.isascii() and k.isdigit() and len(k) < 20):
-                    raise ConfigError(f"{key}: expected integer keys, got {k!r}")
+                    raise ConfigError(f"{_key(key)}: expected integer keys, got {k!r}")
                 k = int(k)
-            out[k] = coerce(v, value_type, f"{key}[{k}]")
+                out[k] = item(v, (key, k))
+            else:
+                out[k] = item(v, (key, f"[{k}]"))
         return out
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
+
+    return check
+
+
+def _union_coercer(tp: Any) -> Coercer:
+    args = typing.get_args(tp)
+    optional = type(None) in args
+    choices = [_coercer(arg) for arg in args if arg is not type(None)]
+
+    def check(value: Any, key: Key) -> Any:
+        if value is None and optional:
             return None
-        for arg in args:
-            if arg is type(None):
-                continue
+        for choice in choices:
             try:
-                return coerce(value, arg, key)
+                return choice(value, key)
             except ConfigError:
                 pass
-        raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
-    if origin is tuple:
-        args = typing.get_args(tp)
+        raise ConfigError(f"{_key(key)}: expected {_type_name(tp)}, got {value!r}")
+
+    return check
+
+
+def _tuple_coercer(tp: Any) -> Coercer:
+    args = typing.get_args(tp)
+    if len(args) == 2 and args[1] is Ellipsis:
+        item = _coercer(args[0])
+
+        def check_all(value: Any, key: Key) -> Any:
+            if not isinstance(value, (list, tuple)):
+                raise ConfigError(f"{_key(key)}: expected {_type_name(tp)}, got {value!r}")
+            return tuple([item(v, (key, i)) for i, v in enumerate(value)])
+
+        return check_all
+    items = [_coercer(arg) for arg in args]
+
+    def check(value: Any, key: Key) -> Any:
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{key}: expected {_type_name(tp)}, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(coerce(v, args[0], f"{key}[{i}]") for i, v in enumerate(value))
-        if len(args) != len(value):
-            raise ConfigError(f"{key}: expected {len(args)} values, got {len(value)}")
-        return tuple(coerce(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{key}: expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{key}: expected an integer, got {value!r}")
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{key}: expected true or false, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{key}: expected a string, got {value!r}")
-        return value
-    raise TypeError(f"unsupported annotation {tp!r} for {key}")
+            raise ConfigError(f"{_key(key)}: expected {_type_name(tp)}, got {value!r}")
+        if len(items) != len(value):
+            raise ConfigError(f"{_key(key)}: expected {len(items)} values, got {len(value)}")
+        return tuple([c(v, (key, i)) for i, (c, v) in enumerate(zip(items, value))])
+
+    return check
 
 
-@functools.cache
+def _float(value: Any, key: Key) -> float:
+    if isinstance(value, float) and math.isfinite(value):
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"{_key(key)}: expected a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ConfigError(f"{_key(key)}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _int(value: Any, key: Key) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{_key(key)}: expected an integer, got {value!r}")
+    return value
+
+
+def _bool(value: Any, key: Key) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{_key(key)}: expected true or false, got {value!r}")
+    return value
+
+
+def _str(value: Any, key: Key) -> str:
+    if not isinstance(value, str):
+        raise ConfigError(f"{_key(key)}: expected a string, got {value!r}")
+    return value
+
+
+_SCALARS: dict[Any, Coercer] = {float: _float, int: _int, bool: _bool, str: _str}
+
+
 @functools.cache
 def _hints(cls: type) -> dict[str, Any]:
     """``cls``'s resolved annotations (resolving them is most of a small table's cost, and
@@ -115,6 +196,22 @@ def _hints(cls: type) -> dict[str, Any]:
 @functools.cache
 def _fields(cls: type) -> dict[str, dataclasses.Field]:
     return {f.name: f for f in dataclasses.fields(cls)}
+
+
+@functools.cache
+def _table_plan(cls: type) -> tuple[tuple[str, Coercer, str, bool], ...]:
+    """Per field of dataclass ``cls``: its name, coercer, key suffix and whether it is
+    required (built once per class)."""
+    hints = _hints(cls)
+    return tuple(
+        (
+            name,
+            _coercer(hints[name]),
+            f".{name}",
+            f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
+        )
+        for name, f in _fields(cls).items()
+    )
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -130,25 +227,28 @@ def read_toml(path: str | Path) -> dict[str, Any]:
 
 def from_table(cls: type[T], table: Any, where: str) -> T:
     """Build dataclass ``cls`` from a TOML table; ``where`` prefixes key names in errors."""
+    return _from_table(cls, table, where)
+
+
+def _from_table(cls: type[T], table: Any, where: Key) -> T:
     if not isinstance(table, dict):
-        raise ConfigError(f"{where}: expected a table, got {table!r}")
-    hints = _hints(cls)
-    fields = _fields(cls)
-    unknown = sorted(set(table) - set(fields))
-    if unknown:
+        raise ConfigError(f"{_key(where)}: expected a table, got {table!r}")
+    if not table.keys() <= _fields(cls).keys():
+        unknown = sorted(set(table) - set(_fields(cls)))
         raise ConfigError(
-            f"{where}.{unknown[0]}: unknown key (expected one of: {', '.join(fields)})"
+            f"{_key(where)}.{unknown[0]}: unknown key (expected one of: {', '.join(_fields(cls))})"
         )
     values = {}
-    for name, f in fields.items():
+    for name, check, suffix, required in _table_plan(cls):
         if name in table:
-            values[name] = coerce(table[name], hints[name], f"{where}.{name}")
-        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise ConfigError(f"{where}.{name}: missing (expected {_type_name(hints[name])})")
+            values[name] = check(table[name], (where, suffix))
+        elif required:
+            hint = _type_name(_hints(cls)[name])
+            raise ConfigError(f"{_key(where)}{suffix}: missing (expected {hint})")
     obj = cls(**values)
-    check = getattr(obj, "validate", None)
-    if check is not None:
-        check(where)
+    validate = getattr(obj, "validate", None)
+    if validate is not None:
+        validate(_key(where))
     return obj
 
 

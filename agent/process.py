@@ -33,10 +33,9 @@ def stop_on_signals_taken(stop: threading.Event | None = None) -> threading.Even
     """An event set by SIGINT, SIGTERM or SIGHUP, with no Python signal handler: the signals
     are blocked in the calling thread (call it from the main thread before any other thread
     starts, so that every thread inherits the mask) and one thread of its own takes them with
-    ``sigwait``. The AGV bridge and the plant use it: measured in a bridge under User-Mode
-    Linux, the handler of :func:`stop_on_signals` left the process stuck in a 0.01 s queue
-    wait after SIGTERM about 2 times in 3 (and a plant on a loaded test machine once did not
-    stop within 5 s of it)."""
+    ``sigwait``. The AGV bridge uses it: measured in a bridge under User-Mode Linux, the
+    handler of :func:`stop_on_signals` left the process stuck in a 0.01 s queue wait after
+    SIGTERM about 2 times in 3."""
     stop = stop or threading.Event()
     signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 

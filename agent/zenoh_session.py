@@ -85,6 +85,12 @@ class ZenohSettings:
             raise ConfigError(f"{where}: {path}: cannot read ({err.strerror or err})") from None
 
 
+TX_QUEUE_BATCHES = 16
+"""Batches in a link's queue for data-priority messages (Zenoh's maximum; its default is 2)."""
+DROP_WAIT_US = 20_000
+"""How long a droppable message waits for room in a full queue (Zenoh's default: 1 000)."""
+
+
 def zenoh_config(settings: ZenohSettings):
     """The ``zenoh.Config`` for ``settings`` (multicast scouting always off): its
     ``config_file`` if any (``zenoh.ZError`` if that is not a valid Zenoh config), with the
@@ -102,6 +108,13 @@ def zenoh_config(settings: ZenohSettings):
     config.insert_json5("transport/shared_memory/enabled", "false")
     config.insert_json5("transport/link/tx/lease", str(settings.lease_ms))
     config.insert_json5("transport/link/tx/keep_alive", "4")
+    # What may be dropped (estimates, statuses, the truth) waits this long for room in a
+    # queue this deep before it is: Zenoh's defaults (2 batches, 1 ms) dropped a message
+    # now and then on a loaded 2-CPU machine, where a process waits milliseconds for a CPU.
+    config.insert_json5("transport/link/tx/queue/size/data", str(TX_QUEUE_BATCHES))
+    config.insert_json5(
+        "transport/link/tx/queue/congestion_control/drop/wait_before_drop", str(DROP_WAIT_US)
+    )
     if settings.mode == "client":
         config.insert_json5("connect/timeout_ms", str(settings.connect_timeout_ms))
         config.insert_json5(

@@ -536,7 +536,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     from agent.config import Bound, bounds
     from agent.dispatch import NETWORK_UNAVAILABLE
-    from agent.process import stop_on_signals_taken
+    from agent.process import stop_on_signals
     from agent.protocol import Keys
     from simulator.can_drivers import CanBusError
     from simulator.node import run_plant
@@ -563,7 +563,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             team,
             args.clock,
             settings,
-            stop_on_signals_taken(),
+            stop_on_signals(),
             args.start_timeout,
             link,
         )

@@ -3,6 +3,7 @@ the paper's scenario file and the accuracy check of a run against the ground tru
 
 from __future__ import annotations
 
+import collections
 import math
 import os
 import subprocess
@@ -18,6 +19,22 @@ if TYPE_CHECKING:
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "simulator" / "scenarios" / "paper.toml"
+
+
+class FakeFifo:
+    """A subscription of a fake Zenoh session declared with a handler (as the launcher's
+    collector declares its own with ``zenoh.handlers.FifoChannel``): call it with a sample
+    to queue it, :meth:`try_recv` to take one (None when empty)."""
+
+    def __init__(self, undeclare=lambda: None) -> None:
+        self.samples: collections.deque = collections.deque()
+        self.undeclare = undeclare
+
+    def __call__(self, sample) -> None:
+        self.samples.append(sample)
+
+    def try_recv(self):
+        return self.samples.popleft() if self.samples else None
 
 
 def worst_errors(outcome: RunOutcome) -> dict[str, float]:

@@ -41,7 +41,7 @@ from simulator.inprocess import run_inprocess
 from simulator.launcher import Collector
 from simulator.node import PlantNode
 from simulator.scenario import Scenario, load_scenario
-from tests.conftest import PAPER
+from tests.conftest import PAPER, FakeFifo
 
 _LOG = logging.getLogger("test.hardening")
 
@@ -109,11 +109,17 @@ class _Session:
     def __init__(self, bus: Bus):
         self.bus = bus
 
-    def declare_subscriber(self, key, callback):
-        entry = (key, callback)
+    def declare_subscriber(self, key, handler):
+        """``handler``: a callback, or a Zenoh handler (then samples queue in a FIFO)."""
+        fifo = None if callable(handler) else FakeFifo()
+        entry = (key, handler if fifo is None else fifo)
         with self.bus.lock:
             self.bus.subscribers.append(entry)
-        return _Declared(lambda: self.bus.subscribers.remove(entry))
+        undeclare = lambda: self.bus.subscribers.remove(entry)  # noqa: E731
+        if fifo is None:
+            return _Declared(undeclare)
+        fifo.undeclare = undeclare
+        return fifo
 
     def declare_publisher(self, key, **_):
         return _Declared(put=lambda data: self.bus.put(key, data))

@@ -15,6 +15,7 @@ import subprocess
 import threading
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -24,6 +25,7 @@ from simulator import launcher
 from simulator.scenario import load_scenario
 from tests.conftest import (
     PAPER,
+    FakeFifo,
     agent_pid,
     child_pid,
     children_of,
@@ -314,15 +316,17 @@ def test_a_slow_start_is_not_a_stall(monkeypatch) -> None:
 
 
 class _Subscriptions:
-    """Just enough of a Zenoh session for a :class:`launcher.Collector` fed by hand."""
+    """Just enough of a Zenoh session for a :class:`launcher.Collector` fed by hand:
+    :meth:`feed` queues a message on the subscription of its key."""
 
-    def declare_subscriber(self, key, callback):
-        return _Undeclared()
+    def __init__(self) -> None:
+        self.fifos: dict[str, FakeFifo] = {}
 
+    def declare_subscriber(self, key, handler):
+        return self.fifos.setdefault(key, FakeFifo())
 
-class _Undeclared:
-    def undeclare(self) -> None:
-        pass
+    def feed(self, key: str, payload: bytes) -> None:
+        self.fifos[key](SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: payload)))
 
 
 def _truth(tick: int) -> Truth:
@@ -346,8 +350,10 @@ def test_the_final_instant_is_the_first_at_which_every_robot_is_done(monkeypatch
     first. The collector still ends on the final instant, the one the in-process run ends on;
     if the final instant never completes, it ends on the later one after a grace."""
     keys = Keys("t")
+    key = {Truth: keys.truth(), Estimates: keys.all_estimates()}
     for final_arrives in (True, False):
-        collector = launcher.Collector(_Subscriptions(), keys, 2, record_every=5)
+        subscriptions = _Subscriptions()
+        collector = launcher.Collector(subscriptions, keys, 2, record_every=5)
         # Robot 1 done since 98, robot 2 since 100: the final instant is 100.
         messages = [(Truth, _truth(101))]
         messages += [
@@ -357,12 +363,12 @@ def test_the_final_instant_is_the_first_at_which_every_robot_is_done(monkeypatch
             (Estimates, Estimates(r, 100, Phase.DONE, since)) for r, since in [(1, 98), (2, 100)]
         ]
         for kind, message in messages:
-            collector.events.put((kind, encode(message)))
+            subscriptions.feed(key[kind], encode(message))
         collector.drain(0.0)
         assert collector.final is not None and collector.final.truth.tick == 101
         assert not collector.finished()
         if final_arrives:
-            collector.events.put((Truth, encode(_truth(100))))
+            subscriptions.feed(key[Truth], encode(_truth(100)))
             collector.drain(0.0)
             assert collector.finished() and collector.final.truth.tick == 100
         else:
