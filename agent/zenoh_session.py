@@ -109,8 +109,9 @@ def zenoh_config(settings: ZenohSettings):
     config.insert_json5("transport/link/tx/lease", str(settings.lease_ms))
     config.insert_json5("transport/link/tx/keep_alive", "4")
     # What may be dropped (estimates, statuses, the truth) waits this long for room in a
-    # queue this deep before it is: Zenoh's defaults (2 batches, 1 ms) dropped a message
-    # now and then on a loaded 2-CPU machine, where a process waits milliseconds for a CPU.
+    # queue this deep before it is. Zenoh's defaults (2 batches, 1 ms) leave no room for a
+    # process that waits milliseconds for a CPU, as on a loaded 2-CPU machine; with these, a
+    # lockstep run there ended on its in-process instant 10 times out of 10.
     config.insert_json5("transport/link/tx/queue/size/data", str(TX_QUEUE_BATCHES))
     config.insert_json5(
         "transport/link/tx/queue/congestion_control/drop/wait_before_drop", str(DROP_WAIT_US)

@@ -183,9 +183,8 @@ class Collector:
 
     Each subscription queues in Zenoh's own FIFO (:data:`FIFO_CAPACITY`), emptied by
     :meth:`drain`: reception never waits for this process's interpreter, so a launcher slowed
-    down by its machine does not make the router drop what it says to it (with a Python
-    callback per message, a loaded test machine once ended a lockstep run an instant late:
-    what the team said of its final instant had not arrived)."""
+    down by its machine does not back up the router's link to it, where messages that may be
+    dropped would be (a run whose final instant is missed ends on a later one)."""
 
     def __init__(self, session, keys: Keys, n: int, record_every: int):
         self.n = n

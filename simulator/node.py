@@ -52,8 +52,8 @@ SLOW_TICK_S = 2.0
 WAIT_S = 0.2
 """The longest the loop waits for something to arrive before it looks at its stop."""
 STATUS_EVERY_S = 1.0
-"""The plant's status goes out this often (wall clock) while it runs, besides at its start,
-its end and each robot lost: a plant killed before its end leaves its counters behind."""
+"""The plant's status goes out this often (wall clock) while it runs, besides at its end and
+each time a robot is lost: a plant killed before its end leaves its counters behind."""
 
 
 class PlantNode:
