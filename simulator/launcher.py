@@ -104,6 +104,9 @@ the launcher names it lost itself (they notice a dead process at once, a hung on
 STALL_S = 15.0
 """Once the plant has started: no new truth for this long means it, or the router, hangs (in
 lockstep a hung agent is dropped by the plant after its lease, so the truth goes on)."""
+LAST_WORDS_S = 1.0
+"""How long the launcher listens once the plant has exited (unless the run is over sooner):
+its final status and the team's estimates of its last ticks may still be on their way."""
 TICK_SLACK = 1000
 """How far ahead of the newest truth heard a message's tick may be: messages from different
 processes cross on the way, and a loaded machine delays some (10 s at 100 Hz)."""
@@ -243,6 +246,15 @@ class Collector:
             if handled or left <= 0:
                 return
             time.sleep(min(POLL_S, left))
+
+    def listen(self, seconds: float, until: Callable[[], bool]) -> None:
+        """Handle what arrives for up to ``seconds``, returning as soon as ``until()``."""
+        deadline = time.monotonic() + seconds
+        while not until():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return
+            self.drain(left)
 
     def _handle(self, kind: type, payload: bytes) -> None:
         if self._finished and kind not in (PlantStatus, BridgeStatus):
@@ -419,12 +431,17 @@ def run_zenoh(
     progress_every_s: float = 5.0,
     log_stream: TextIO | None = None,
     wall_timeout_s: float | None = None,
+    stall_s: float | None = None,
     stop: threading.Event | None = None,
     can: CanLink | None = None,
     on_ready: Callable[[str, str], None] | None = None,
 ) -> RunOutcome:
     """Run ``scenario`` with one process per robot over Zenoh (see the module docstring);
     with ``can``, the robots on CAN behind one AGV bridge each.
+
+    The run is ``stalled`` once the plant has published no new truth for ``stall_s``
+    (default :data:`STALL_S`); a machine whose every tick is slow (User-Mode Linux on a
+    loaded host) needs more.
 
     ``on_ready(router, team)`` is called once the run's router is up at endpoint ``router``,
     before the plant and the agents start: a recorder or a dashboard subscribes to team
@@ -496,7 +513,7 @@ def run_zenoh(
                             all_up = all_up and len(bridges) == scenario.n
                         if plant is not None and all_up:
                             watch = _Watch(
-                                collector, router_child, plant, agents, scenario, bridges
+                                collector, router_child, plant, agents, scenario, bridges, stall_s
                             )
                             verdict = watch.run(
                                 stop, progress, progress_every_s, started + wall_timeout_s
@@ -601,6 +618,7 @@ class _Watch:
         agents: list[Child],
         scenario: Scenario,
         bridges: Sequence[Child] = (),
+        stall_s: float | None = None,
     ):
         self.collector = collector
         self.router = router
@@ -609,6 +627,8 @@ class _Watch:
         self.bridges = list(bridges)
         """Robot ``i``'s AGV bridge at ``i - 1`` (a CAN run; none otherwise)."""
         self.scenario = scenario
+        self.stall_s = STALL_S if stall_s is None else stall_s
+        """How long without new truth from the plant makes the run ``stalled``."""
         self.gone: dict[int, tuple[float, int, str]] = {}
         """Robots whose agent (or bridge) process exited mid-run: when, its exit code, and
         which (``agent``, ``bridge``)."""
@@ -676,7 +696,9 @@ class _Watch:
             return Verdict(ROUTER_LOST, f"the Zenoh router process ended ({how}) at {self._t()}")
         code = self.plant.process.poll()
         if code is not None:
-            collector.drain(0.5)  # what it said last (its status), and the team's last words
+            # What it said last (its status), and the team's last words: the estimates of
+            # its last ticks may still be on their way.
+            collector.listen(LAST_WORDS_S, collector.finished)
             if collector.finished():
                 return self._team()
             return self._plant_exit(code)
@@ -719,10 +741,10 @@ class _Watch:
 
     def _stalled(self) -> Verdict | None:
         advanced_at = self.collector.advanced_at
-        if advanced_at is not None and time.perf_counter() - advanced_at > STALL_S:
+        if advanced_at is not None and time.perf_counter() - advanced_at > self.stall_s:
             return Verdict(
                 STALLED,
-                f"no new truth from the plant for {STALL_S:g} s after {self._t()}: the plant,"
+                f"no new truth from the plant for {self.stall_s:g} s after {self._t()}: the plant,"
                 " the router or an agent the plant waits for hangs",
             )
         return None
