@@ -144,8 +144,14 @@ def _tuple_coercer(tp: Any) -> Coercer:
 
         return check_all
     items = [_coercer(arg) for arg in args]
+    floats = all(item is _float for item in items)
+    n = len(items)
 
     def check(value: Any, key: Key) -> Any:
+        # The common case first: a vector of n finite floats (the protocol's every point).
+        if floats and type(value) is list and len(value) == n:
+            if all(type(v) is float for v in value) and all(map(math.isfinite, value)):
+                return tuple(value)
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"{_key(key)}: expected {_type_name(tp)}, got {value!r}")
         if len(items) != len(value):

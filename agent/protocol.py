@@ -27,11 +27,14 @@ estimator or a plotting library.
 from __future__ import annotations
 
 import dataclasses as _dataclasses
+import functools as _functools
 import json as _json
 import math as _math
 import struct as _struct
 from dataclasses import dataclass, field
 from enum import IntEnum
+
+import orjson as _orjson
 
 from agent.config import ConfigError, from_table
 from agent.estimation.geometry import Vec2
@@ -511,16 +514,20 @@ def _no_constants(name: str):
     raise ValueError(f"{name} is not a number this protocol accepts")
 
 
+@_functools.cache
+def _field_names(cls: type) -> frozenset[str]:
+    return frozenset(f.name for f in _dataclasses.fields(cls))
+
+
 def _json_message(cls: type, body: memoryview):
     name = cls.__name__
     try:
-        data = _json.loads(bytes(body), parse_constant=_no_constants)
-    except (UnicodeDecodeError, ValueError, RecursionError) as err:
+        data = _orjson.loads(body)
+    except (_orjson.JSONDecodeError, RecursionError) as err:
         raise DecodeError(f"{name}: not JSON ({type(err).__name__}: {err})") from None
     if not isinstance(data, dict):
         raise DecodeError(f"{name}: expected a JSON object")
-    expected = {f.name for f in _dataclasses.fields(cls)}
-    if set(data) != expected:
+    if data.keys() != _field_names(cls):
         raise DecodeError(f"{name}: keys {sorted(data)} are not those of {name}")
     try:
         return from_table(cls, data, name)

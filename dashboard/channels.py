@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import json
 import types
 import typing
@@ -66,6 +67,14 @@ def team_wildcard(keys: Keys) -> str:
 def kind_of(keys: Keys, key: str) -> type | None:
     """The message class carried on ``key`` of ``keys``' team, or None for a key that carries
     none (a liveliness token's, another team's, a malformed one)."""
+    return _kind_on(keys.team, key)
+
+
+@functools.lru_cache(maxsize=4096)
+def _kind_on(team: str, key: str) -> type | None:
+    """:func:`kind_of`, remembered: a team's few keys carry every message (a flood of other
+    keys only evicts entries, bounded)."""
+    keys = Keys(team)
     for kind, method in TEAM_KINDS.items():
         if key == method(keys):
             return kind

@@ -1,10 +1,13 @@
 """The live source: a team's messages from Zenoh, decoded on a thread of their own.
 
-Zenoh's callbacks only append ``(key, payload, arrival)`` to a bounded inbox (a flood fills it
-and is counted, never memory); a worker thread takes the inbox every :data:`POLL_S`, decodes
-each payload through the protocol (:func:`dashboard.channels.decode_on`: every field checked,
-a robot's message only on its own key), counts and drops what fails, and hands the rest to
-the sinks (the dashboard's hub, a recorder) in one batch.
+Each subscription queues its samples in Zenoh's own FIFO (:data:`FIFO_CAPACITY`), outside
+Python: no Zenoh thread ever waits for this process's interpreter, and a flood fills the FIFOs,
+then backs up the link to the router, never this process's memory. A worker thread empties
+them every :data:`POLL_S`, decodes each payload through the protocol
+(:func:`dashboard.channels.decode_on`: every field checked, a robot's message only on its own
+key), counts and drops what fails, and hands the rest to the sinks (the dashboard's hub, a
+recorder) in one batch. A message's arrival is when the worker took it (within
+:data:`POLL_S`). The agents' liveliness tokens, rare, come through a callback.
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 
+import zenoh
+
 from agent.config import MAX_ROBOTS
 from agent.process import RejectLog
 from agent.protocol import DecodeError, Keys
@@ -22,8 +27,8 @@ from agent.zenoh_session import ZenohSettings, open_session, watch_liveliness
 from dashboard.channels import decode_on, team_wildcard
 
 POLL_S = 0.02
-INBOX = 100_000
-"""Messages waiting for the worker, at most; beyond, new ones are dropped and counted."""
+FIFO_CAPACITY = 1 << 14
+"""Samples each subscription holds for the worker before Zenoh's reception waits."""
 LOG = logging.getLogger("heft.dashboard")
 
 Batch = list[tuple[str, object, float, int]]
@@ -72,11 +77,10 @@ class LiveFeed:
         self.subscriptions = list(subscriptions or display_keys(keys))
         self.on_liveliness = liveliness
         self.rejects = RejectLog(LOG, "dashboard")
-        self.overflow = 0
-        """Messages dropped undecoded because the inbox was full (logged by the worker)."""
-        self._overflow_logged = 0
         self.failures = 0
-        self._inbox: deque = deque()
+        self._fifos: list = []
+        self._tokens: deque = deque()
+        """Liveliness changes from Zenoh's callback: ``(key, alive, arrival)``."""
         self._session = session
         self._own_session = session is None
         self._subscribers: list = []
@@ -88,31 +92,21 @@ class LiveFeed:
         subscribe; the worker starts at once."""
         if self._session is None:
             self._session = open_session(self.settings)
-        put = self._put
         for key in self.subscriptions:
-            self._subscribers.append(
-                self._session.declare_subscriber(
-                    key, lambda s: put(str(s.key_expr), s.payload.to_bytes())
-                )
-            )
+            fifo = zenoh.handlers.FifoChannel(FIFO_CAPACITY)
+            self._fifos.append(self._session.declare_subscriber(key, fifo))
+        self._subscribers.extend(self._fifos)
         if self.on_liveliness is not None:
-            inbox = self._inbox
+            tokens = self._tokens
             self._subscribers.append(
                 watch_liveliness(
                     self._session,
                     self.keys.all_alive(),
-                    lambda key, alive: inbox.append((key, alive, time.monotonic(), 0)),
+                    lambda key, alive: tokens.append((key, alive, time.monotonic())),
                 )
             )
         self._thread.start()
         return self
-
-    def _put(self, key: str, payload: bytes) -> None:
-        """Zenoh's callback: tiny, no decoding here."""
-        if len(self._inbox) >= INBOX:
-            self.overflow += 1
-            return
-        self._inbox.append((key, payload, time.monotonic(), time.time_ns()))
 
     def _run(self) -> None:
         while not self._stop.wait(POLL_S):
@@ -131,22 +125,24 @@ class LiveFeed:
     def drain(self) -> None:
         """Decode what has arrived and hand it to the sinks (the worker does it every
         :data:`POLL_S`)."""
+        tokens = self._tokens
+        for _ in range(len(tokens)):
+            self._liveliness(*tokens.popleft())
         batch: Batch = []
-        inbox = self._inbox
-        for _ in range(len(inbox)):
-            key, payload, arrived, stamp = inbox.popleft()
-            if isinstance(payload, bool):  # a liveliness token came or went
-                self._liveliness(key, payload, arrived)
-                continue
-            try:
-                message = decode_on(self.keys, key, payload)
-            except DecodeError as err:
-                self.rejects(key.rsplit("/", 1)[-1], err)
-                continue
-            batch.append((key, message, arrived, stamp))
-        if self.overflow > self._overflow_logged:
-            LOG.warning("dashboard: inbox full, %d message(s) dropped so far", self.overflow)
-            self._overflow_logged = self.overflow
+        arrived, stamp = time.monotonic(), time.time_ns()
+        keys, rejects = self.keys, self.rejects
+        for fifo in self._fifos:
+            for _ in range(FIFO_CAPACITY):  # what it held when reached, at most
+                sample = fifo.try_recv()
+                if sample is None:
+                    break
+                key = str(sample.key_expr)
+                try:
+                    message = decode_on(keys, key, sample.payload.to_bytes())
+                except DecodeError as err:
+                    rejects(key.rsplit("/", 1)[-1], err)
+                    continue
+                batch.append((key, message, arrived, stamp))
         if batch:
             for sink in self.sinks:
                 sink(batch)
