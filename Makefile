@@ -31,12 +31,14 @@ bench: $(STAMP)  ## Accuracy, step durations and speed: in one process, then ove
 	$(BIN)/heft bench
 	$(BIN)/heft bench --transport zenoh
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml dashboard/package-lock.json
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 is needed"'
+	@command -v npm >/dev/null || { echo "npm is needed (the dashboard's uPlot): apt-get install npm" >&2; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
+	npm ci --prefix dashboard --no-audit --no-fund --loglevel=error
 	touch $(STAMP)
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .ruff_cache *.egg-info
+	rm -rf $(VENV) out .pytest_cache .ruff_cache *.egg-info dashboard/node_modules

@@ -2,8 +2,10 @@
 
 ========================== ==============================================================
 ``GET /``                   the page (``dashboard/static/``)
-``GET /vendor/plotly.js``   the charting library, served from the installed ``plotly``
-                            package (no CDN: robots run offline)
+``GET /vendor/uplot.js``    the time charts' library (and ``uplot.css``), installed from the
+                            npm registry into ``dashboard/node_modules`` by ``make``
+``GET /vendor/plotly.js``   the other charts' library, served from the installed ``plotly``
+                            package (no CDN for either: robots run offline)
 ``GET /api/snapshot``       the latest state: per robot phase, m̂, Ĵ, ``contact_to_com``,
                             ``relative_positions``; each link's health; the truth if known
 ``GET /api/summary``        the final table of estimates against truth (404 before)
@@ -79,6 +81,23 @@ def to_json(value) -> str:
     """``value`` as compact JSON text for the pages (orjson: a frame is encoded 20 times a
     second; a number that is not finite becomes ``null``)."""
     return orjson.dumps(value, option=orjson.OPT_NON_STR_KEYS).decode()
+
+
+UPLOT = Path(__file__).with_name("node_modules") / "uplot" / "dist"
+"""Where ``npm ci --prefix dashboard`` (run by ``make``) puts uPlot's bundle."""
+VENDOR = {
+    "uplot.js": (UPLOT / "uPlot.iife.min.js", "text/javascript"),
+    "uplot.css": (UPLOT / "uPlot.min.css", "text/css"),
+}
+
+
+INSTALL_HINT = "run make, or npm ci --prefix dashboard"
+
+
+def missing_vendor() -> list[Path]:
+    """The charting libraries' files the page needs that are not installed."""
+    paths = [path for path, _ in VENDOR.values()] + [plotly_js()]
+    return [path for path in paths if not path.is_file()]
 
 
 def plotly_js() -> Path:
@@ -187,6 +206,19 @@ def create_app(hub: Hub, settings: AppSettings | None = None) -> FastAPI:
             plotly_js(),
             media_type="text/javascript",
             headers={"Cache-Control": "public, max-age=86400"},
+        )
+
+    @app.get("/vendor/{name}", include_in_schema=False)
+    async def vendor(name: str) -> FileResponse:
+        if name not in VENDOR:
+            raise HTTPException(404, f"no such file: /vendor/{name}")
+        path, media_type = VENDOR[name]
+        if not path.is_file():
+            raise HTTPException(
+                503, f"{path} is not installed: run make (npm ci --prefix dashboard)"
+            )
+        return FileResponse(
+            path, media_type=media_type, headers={"Cache-Control": "public, max-age=86400"}
         )
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")

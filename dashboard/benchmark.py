@@ -98,7 +98,8 @@ class BenchReport:
             f" p99 {self.percentile(self.server_ms, 0.99):.0f} ms",
             f"  page redraw: charts p50 {self.percentile(self.chart_ms, 0.5):.1f} ms,"
             f" p99 {self.percentile(self.chart_ms, 0.99):.1f} ms; top view, graph, timeline"
-            f" and table p50 {self.percentile(self.scene_ms, 0.5):.1f} ms",
+            f" and table p50 {self.percentile(self.scene_ms, 0.5):.1f} ms,"
+            f" p99 {self.percentile(self.scene_ms, 0.99):.1f} ms",
             f"  replay of {s.replay_minutes * s.replay_speed:g} recorded minutes at"
             f" {s.replay_speed:g}x: resident memory {self._rss()}, growth after the first"
             f" quarter {growth:.1f} % (goal < {GOALS['memory_growth_pct']:g} %:"

@@ -5,10 +5,12 @@ beside its run (:mod:`dashboard.companion`)."""
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 from agent.zenoh_session import ZenohSettings
 
+LOG = logging.getLogger("heft.dashboard")
 DEFAULT_PORT = 8765
 """The dashboard's port unless told otherwise."""
 
@@ -35,10 +37,17 @@ class Display:
         recording: Path | None = None,
     ) -> Display:
         """Serve the page on ``host:port`` (:class:`~dashboard.server.ServeError` if taken)."""
-        from dashboard.app import AppSettings, create_app
+        from dashboard.app import INSTALL_HINT, AppSettings, create_app, missing_vendor
         from dashboard.hub import Hub
         from dashboard.server import Server
 
+        missing = missing_vendor()
+        if missing:
+            LOG.warning(
+                "dashboard: the page's charts will not draw: %s not installed (%s)",
+                ", ".join(str(path) for path in missing),
+                INSTALL_HINT,
+            )
         hub = Hub(team or "", geometry, recording=recording)
         server = Server(create_app(hub, AppSettings(token=token)), host, port).start()
         url = server.url if token is None else f"{server.url}?token={token}"

@@ -89,14 +89,23 @@ def test_the_websocket_sends_a_hello_then_frames_of_new_points(paper_run) -> Non
             assert frame["scene"]["robots"]["1"]["tick"] == sample.estimates[1].tick
 
 
-def test_the_page_and_the_charting_library_are_served(paper_run) -> None:
+def test_the_page_and_the_charting_libraries_are_served(paper_run) -> None:
     with TestClient(create_app(fed_hub(paper_run, upto=1))) as client:
         page = client.get("/")
-        assert page.status_code == 200 and "vendor/plotly.js" in page.text
+        assert page.status_code == 200
+        for path in ("vendor/plotly.js", "vendor/uplot.js", "vendor/uplot.css"):
+            assert path in page.text
         assert client.get("/static/dashboard.js").status_code == 200
         library = client.get("/vendor/plotly.js")
         assert library.status_code == 200 and len(library.content) > 1_000_000
         assert b"plotly.js" in library.content[:2000]
+        uplot = client.get("/vendor/uplot.js")  # installed by make from the npm registry
+        assert uplot.status_code == 200, uplot.text
+        assert uplot.headers["content-type"].startswith("text/javascript")
+        assert b"uPlot" in uplot.content and len(uplot.content) > 20_000
+        assert client.get("/vendor/uplot.css").headers["content-type"].startswith("text/css")
+        unknown = client.get("/vendor/jquery.js")
+        assert unknown.status_code == 404 and "no such file" in unknown.json()["detail"]
         missing = client.get("/nothing")
         assert missing.status_code == 404 and missing.json()["detail"]
 

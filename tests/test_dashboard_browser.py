@@ -106,8 +106,12 @@ TOP_SAMPLER = """() => {
     if (contacts) window.topSamples.push([contacts.x[0], contacts.y[0]]);
   }, 100);
 }"""
-CHART_ENDS = """(id) => document.getElementById(id).data.map((t) => ({
+CHART_ENDS = """(name) => window.heft.charts[name].lines().map((t) => ({
   name: t.name, first: t.y[0], last: t.y[t.y.length - 1], count: t.y.length }))"""
+CHART_DRAWN = """(name) => {
+  const plot = window.heft.charts[name].plot;
+  return plot ? [plot.series.length - 1, plot.data[0].length] : null;
+}"""
 
 
 def wait_for(predicate, timeout_s: float, what: str, display=None) -> None:
@@ -172,15 +176,17 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
                 live = display.hub.summary()
 
                 # The charts hold m̂ and Ĵ converging to the truth (5 kg, 12.3795 kg m²).
-                for chart, truth in (("chart-mass", 5.0), ("chart-moment", 12.3795)):
+                for chart, truth in (("mass", 5.0), ("moment", 12.3795)):
                     traces = {t["name"]: t for t in page.evaluate(CHART_ENDS, chart)}
+                    drawn = page.evaluate(CHART_DRAWN, chart)  # uPlot holds every trace
+                    assert drawn is not None and drawn[0] == len(traces) and drawn[1] > 20
                     robots = [t for name, t in traces.items() if "robot" in name]
                     assert len(robots) == 4, traces
                     truth_trace = next(t for name, t in traces.items() if "truth" in name)
                     assert truth_trace["last"] == truth
                     for trace in robots:
                         assert abs(trace["last"] - truth) / truth < 1e-3, trace
-                edges = [t for t in page.evaluate(CHART_ENDS, "chart-edge") if "robot" in t["name"]]
+                edges = [t for t in page.evaluate(CHART_ENDS, "edge") if "robot" in t["name"]]
                 assert len(edges) == 3
                 contacts = scenario.contacts
                 true_norms = [math.dist(contacts[i - 1], contacts[i]) for i in (1, 2, 3)]

@@ -1,8 +1,10 @@
-// The team dashboard's page: a WebSocket of frames from the server (dashboard/app.py) drawn
-// with Plotly (served by the app from the installed plotly package).
+// The team dashboard's page: a WebSocket of frames from the server (dashboard/app.py), the
+// time charts drawn with uPlot, the phase timeline, top view and graph with Plotly (both
+// served by the app: uPlot installed from the npm registry, Plotly from the plotly package).
 //
-// Memory is bounded: every chart trace keeps at most MAX_POINTS points (Plotly's maxPoints),
-// and the points that arrive while the charts are paused wait in buffers of the same bound.
+// Memory is bounded: a time chart keeps at most MAX_COLUMNS instants (the server sends at most
+// MAX_POINTS points per trace), and the points that arrive while paused wait in the same
+// arrays (paused, only the drawing stops).
 "use strict";
 
 const MAX_POINTS = 3000;
@@ -45,69 +47,179 @@ function baseLayout(extra) {
 }
 
 // ------------------------------------------------------------------------ time charts
+// The time charts are uPlot's (canvas: in heft bench --dashboard, 16 robots and three pages
+// on two cores, a chart's redraw took p99 25 ms, where Plotly's SVG charts took 277 ms).
+// uPlot draws a chart's traces on one shared x axis: a chart keeps the sorted
+// union of its traces' times (the server's points are at ticks' times) and a column of values
+// per trace, null where a trace has no point at that time (its line spans the gap).
+const MAX_COLUMNS = 2 * MAX_POINTS; // the robots' points and the truth's may fall on different ticks
+const DASHES = { solid: null, dash: [6, 4], dot: [2, 3] };
+const AXIS = {
+  stroke: "#d8dde6", font: "11px system-ui, sans-serif",
+  grid: { stroke: "#2a2f3a", width: 1 }, ticks: { stroke: "#2a2f3a", width: 1 },
+};
+
+function tickLabels(u, splits) {
+  // as many decimals as the step between ticks needs: 0.25 stays 0.25, and m̂ settling to
+  // 1e-5 of the truth gets 4.99999 and 5.00000 rather than 5 and 5
+  const step = splits.length > 1 ? Math.abs(splits[1] - splits[0]) : 1;
+  let decimals = Math.max(0, -Math.floor(Math.log10(step || 1)));
+  while (decimals < 10 && Math.abs(step * 10 ** decimals - Math.round(step * 10 ** decimals)) > 1e-6) {
+    decimals += 1;
+  }
+  return splits.map((v) => v.toFixed(decimals));
+}
+
+function labelWidth(u, values, axis, cycle) {
+  // the y axis as wide as its longest tick label (uPlot calls this again once labels change)
+  if (cycle > 1 || !values) return u.axes[axis]._size || 48;
+  u.ctx.font = u.axes[axis].font[0]; // the font as uPlot scales it for the canvas
+  const widest = values.reduce((w, v) => Math.max(w, u.ctx.measureText(String(v)).width), 0);
+  return Math.ceil(widest / devicePixelRatio) + 16;
+}
+
 class TimeChart {
   constructor(id, quantity, describe) {
     this.div = document.getElementById(id);
     this.quantity = quantity; // trace ids are QUANTITY/...
     this.describe = describe; // trace id -> {name, colour, dash}
+    this.plot = null;
+    this.switches = []; // [t, colour] of the team's phase switches
+    this.shown = null; // [first, last] time of the data last handed to uPlot
+    new ResizeObserver(() => { if (this.plot) this.plot.setSize(this.size()); }).observe(this.div);
     this.reset();
   }
   reset() {
-    this.index = new Map(); // trace id -> Plotly trace index
-    this.pending = new Map(); // trace id -> {x: [], y: []}
+    this.traces = []; // trace ids, in column order
+    this.index = new Map(); // trace id -> column
+    this.x = [];
+    this.ys = [];
     this.last = new Map(); // trace id -> newest t
-    this.shapes = "";
-    Plotly.newPlot(this.div, [], baseLayout(), PLOT_CONFIG);
+    this.dirty = true;
+    this.rebuild = true;
+  }
+  size() {
+    return { width: Math.max(120, this.div.clientWidth), height: Math.max(80, this.div.clientHeight) };
+  }
+  column(t) {
+    // the index of time t in this.x, inserted (null in every trace) if new
+    const x = this.x, n = x.length;
+    if (n === 0 || t > x[n - 1]) {
+      x.push(t);
+      for (const y of this.ys) y.push(null);
+      return n;
+    }
+    let lo = 0, hi = n - 1;
+    while (lo < hi) {
+      const mid = (lo + hi) >> 1;
+      if (x[mid] < t) lo = mid + 1; else hi = mid;
+    }
+    if (x[lo] !== t) {
+      x.splice(lo, 0, t);
+      for (const y of this.ys) y.splice(lo, 0, null);
+    }
+    return lo;
   }
   add(trace, points) {
+    let i = this.index.get(trace);
+    if (i === undefined) {
+      i = this.traces.length;
+      this.index.set(trace, i);
+      this.traces.push(trace);
+      this.ys.push(new Array(this.x.length).fill(null));
+      this.rebuild = true;
+    }
     let last = this.last.has(trace) ? this.last.get(trace) : -Infinity;
-    let buffer = this.pending.get(trace);
-    if (!buffer) { buffer = { x: [], y: [] }; this.pending.set(trace, buffer); }
     for (const [t, y] of points) {
       if (t <= last) continue; // already drawn (a hello and a frame may overlap)
-      buffer.x.push(t); buffer.y.push(y); last = t;
-    }
-    if (buffer.x.length > MAX_POINTS) {
-      buffer.x.splice(0, buffer.x.length - MAX_POINTS);
-      buffer.y.splice(0, buffer.y.length - MAX_POINTS);
+      this.ys[i][this.column(t)] = y;
+      last = t;
     }
     this.last.set(trace, last);
+    const excess = this.x.length - MAX_COLUMNS;
+    if (excess > 0) {
+      this.x.splice(0, excess);
+      for (const y of this.ys) y.splice(0, excess);
+    }
+    this.dirty = true;
+  }
+  zoomed() {
+    // whether the x range shown is narrower than the data's (the user zoomed in)
+    if (!this.plot || !this.shown) return false;
+    const [first, last] = this.shown, scale = this.plot.scales.x;
+    const slack = 1e-9 * Math.max(1, Math.abs(last - first));
+    return scale.min > first + slack || scale.max < last - slack;
   }
   flush() {
-    const fresh = [], extendIdx = [], xs = [], ys = [];
-    for (const [trace, buffer] of this.pending) {
-      if (!buffer.x.length) continue;
-      if (!this.index.has(trace)) {
-        const look = this.describe(trace);
-        this.index.set(trace, this.index.size);
-        fresh.push({ type: "scatter", mode: "lines", name: look.name, x: buffer.x, y: buffer.y,
-          line: { color: look.colour, width: look.width || 1.6, dash: look.dash || "solid" },
-          hovertemplate: `${look.name}: %{y:.5g} at t = %{x:.2f} s<extra></extra>` });
-      } else {
-        extendIdx.push(this.index.get(trace)); xs.push(buffer.x); ys.push(buffer.y);
-      }
-    }
-    this.pending = new Map();
-    if (fresh.length) Plotly.addTraces(this.div, fresh);
-    if (extendIdx.length) Plotly.extendTraces(this.div, { x: xs, y: ys }, extendIdx, MAX_POINTS);
+    if (!this.dirty && !this.rebuild) return;
+    const data = [this.x.slice(), ...this.ys.map((y) => y.slice())];
+    const zoomed = this.zoomed();
+    this.shown = this.x.length ? [this.x[0], this.x[this.x.length - 1]] : null;
+    this.dirty = false;
+    if (this.rebuild || !this.plot) this.build(data, zoomed);
+    else this.plot.batch(() => this.plot.setData(data, !zoomed)); // drawn now, not in a microtask
   }
-  setShapes(shapes) {
-    const key = JSON.stringify(shapes);
-    if (key === this.shapes) return;
-    this.shapes = key;
-    Plotly.relayout(this.div, { shapes: shapes });
+  build(data, zoomed) {
+    const range = this.plot && zoomed ? [this.plot.scales.x.min, this.plot.scales.x.max] : null;
+    if (this.plot) this.plot.destroy();
+    this.rebuild = false;
+    const series = [{ label: "t" }];
+    for (const trace of this.traces) {
+      const look = this.describe(trace);
+      series.push({ label: look.name, stroke: look.colour, width: look.width || 1.6,
+        dash: DASHES[look.dash || "solid"], spanGaps: true, points: { show: false } });
+    }
+    this.plot = new uPlot({
+      ...this.size(),
+      legend: { show: false },
+      scales: { x: { time: false } },
+      cursor: { drag: { x: true, y: false }, points: { show: false } },
+      axes: [
+        { ...AXIS, label: "t (s)", labelSize: 16, labelFont: AXIS.font, size: 30 },
+        { ...AXIS, size: labelWidth, values: tickLabels },
+      ],
+      series,
+      hooks: { draw: [(u) => this.drawSwitches(u)] },
+    }, data, this.div);
+    if (range) this.plot.setScale("x", { min: range[0], max: range[1] });
+  }
+  drawSwitches(u) {
+    // the team's phase switches as dotted vertical lines
+    const ctx = u.ctx, { left, top, width, height } = u.bbox;
+    ctx.save();
+    ctx.lineWidth = devicePixelRatio;
+    ctx.setLineDash([2 * devicePixelRatio, 3 * devicePixelRatio]);
+    for (const [t, colour] of this.switches) {
+      const x = Math.round(u.valToPos(t, "x", true));
+      if (x < left || x > left + width) continue;
+      ctx.strokeStyle = colour;
+      ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
+    }
+    ctx.restore();
+  }
+  setSwitches(switches) {
+    if (JSON.stringify(switches) === JSON.stringify(this.switches)) return;
+    this.switches = switches;
+    if (this.plot) this.plot.redraw(false, false);
+  }
+  lines() {
+    // [{name, x, y}] per trace: its points, in time order
+    return this.traces.map((trace, i) => {
+      const x = [], y = [];
+      this.ys[i].forEach((value, k) => { if (value !== null) { x.push(this.x[k]); y.push(value); } });
+      return { name: this.describe(trace).name, x, y };
+    });
   }
   visible() {
     // [trace name, t, value] of the points inside the current x range
-    const range = this.div.layout && this.div.layout.xaxis && !this.div.layout.xaxis.autorange
-      ? this.div.layout.xaxis.range : null;
+    const scale = this.plot ? this.plot.scales.x : null;
+    const zoomed = this.zoomed();
     const rows = [];
-    for (const trace of this.div.data || []) {
-      for (let k = 0; k < trace.x.length; k++) {
-        const t = trace.x[k];
-        if (range && (t < range[0] || t > range[1])) continue;
-        rows.push([trace.name, t, trace.y[k]]);
-      }
+    for (const line of this.lines()) {
+      line.x.forEach((t, k) => {
+        if (zoomed && (t < scale.min || t > scale.max)) return;
+        rows.push([line.name, t, line.y[k]]);
+      });
     }
     return rows;
   }
@@ -162,8 +274,10 @@ function switchLines(scene) {
 }
 
 function drawSwitches(scene) {
-  const shapes = switchLines(scene);
-  for (const chart of Object.values(charts)) chart.setShapes(shapes);
+  const switches = Object.entries(scene.switches || {})
+    .filter(([phase]) => phase !== "excite")
+    .map(([phase, t]) => [t, PHASE_COLOURS[phase] || "#888"]);
+  for (const chart of Object.values(charts)) chart.setSwitches(switches);
 }
 
 // ------------------------------------------------------------------------ the phase timeline
