@@ -510,10 +510,6 @@ def _unpack(layout: _struct.Struct, body: memoryview, name: str) -> tuple:
     return values
 
 
-def _no_constants(name: str):
-    raise ValueError(f"{name} is not a number this protocol accepts")
-
-
 @_functools.cache
 def _field_names(cls: type) -> frozenset[str]:
     return frozenset(f.name for f in _dataclasses.fields(cls))

@@ -89,8 +89,6 @@ VENDOR = {
     "uplot.js": (UPLOT / "uPlot.iife.min.js", "text/javascript"),
     "uplot.css": (UPLOT / "uPlot.min.css", "text/css"),
 }
-
-
 INSTALL_HINT = "run make, or npm ci --prefix dashboard"
 
 
@@ -214,9 +212,7 @@ def create_app(hub: Hub, settings: AppSettings | None = None) -> FastAPI:
             raise HTTPException(404, f"no such file: /vendor/{name}")
         path, media_type = VENDOR[name]
         if not path.is_file():
-            raise HTTPException(
-                503, f"{path} is not installed: run make (npm ci --prefix dashboard)"
-            )
+            raise HTTPException(503, f"{path} is not installed: {INSTALL_HINT}")
         return FileResponse(
             path, media_type=media_type, headers={"Cache-Control": "public, max-age=86400"}
         )
