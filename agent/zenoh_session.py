@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from agent.config import ConfigError, bounded, check_bounds
@@ -194,3 +194,21 @@ def watch_liveliness(session, key: str, on_change: Callable[[str, bool], None]):
         lambda s: on_change(str(s.key_expr), s.kind == zenoh.SampleKind.PUT),
         history=True,
     )
+
+
+def fifo_subscriber(session, key: str, capacity: int):
+    """A subscriber to ``key`` whose samples queue in Zenoh's own FIFO of ``capacity``,
+    outside Python: reception never waits for this process's interpreter (when the FIFO is
+    full, the link to the router backs up). Empty it with :func:`take`."""
+    import zenoh
+
+    return session.declare_subscriber(key, zenoh.handlers.FifoChannel(capacity))
+
+
+def take(subscriber, limit: int) -> Iterator:
+    """The samples a :func:`fifo_subscriber` holds, at most ``limit``, without waiting."""
+    for _ in range(limit):
+        sample = subscriber.try_recv()
+        if sample is None:
+            return
+        yield sample

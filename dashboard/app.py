@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import hmac
 import logging
 import time
@@ -85,22 +86,24 @@ def to_json(value) -> str:
 
 UPLOT = Path(__file__).with_name("node_modules") / "uplot" / "dist"
 """Where ``npm ci --prefix dashboard`` (run by ``make``) puts uPlot's bundle."""
-VENDOR = {
-    "uplot.js": (UPLOT / "uPlot.iife.min.js", "text/javascript"),
-    "uplot.css": (UPLOT / "uPlot.min.css", "text/css"),
-}
-INSTALL_HINT = "run make, or npm ci --prefix dashboard"
+NPM_HINT = "run make, or npm ci --prefix dashboard"
 
 
-def missing_vendor() -> list[Path]:
-    """The charting libraries' files the page needs that are not installed."""
-    paths = [path for path, _ in VENDOR.values()] + [plotly_js()]
-    return [path for path in paths if not path.is_file()]
+@functools.cache
+def vendor_files() -> dict[str, tuple[Path, str, str]]:
+    """The charting libraries' files the page loads from ``/vendor/``: each one's path, media
+    type, and how to install it."""
+    plotly = Path(str(resources.files("plotly") / "package_data" / "plotly.min.js"))
+    return {
+        "uplot.js": (UPLOT / "uPlot.iife.min.js", "text/javascript", NPM_HINT),
+        "uplot.css": (UPLOT / "uPlot.min.css", "text/css", NPM_HINT),
+        "plotly.js": (plotly, "text/javascript", "pip install plotly"),
+    }
 
 
-def plotly_js() -> Path:
-    """The ``plotly.min.js`` bundle the ``plotly`` Python package ships."""
-    return Path(str(resources.files("plotly") / "package_data" / "plotly.min.js"))
+def missing_vendor() -> list[str]:
+    """Those of :func:`vendor_files` that are not installed, each with how to install it."""
+    return [f"{path} ({hint})" for path, _, hint in vendor_files().values() if not path.is_file()]
 
 
 class Broadcaster:
@@ -198,21 +201,13 @@ def create_app(hub: Hub, settings: AppSettings | None = None) -> FastAPI:
     async def index() -> FileResponse:
         return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-cache"})
 
-    @app.get("/vendor/plotly.js", include_in_schema=False)
-    async def vendor_plotly() -> FileResponse:
-        return FileResponse(
-            plotly_js(),
-            media_type="text/javascript",
-            headers={"Cache-Control": "public, max-age=86400"},
-        )
-
     @app.get("/vendor/{name}", include_in_schema=False)
     async def vendor(name: str) -> FileResponse:
-        if name not in VENDOR:
+        if name not in vendor_files():
             raise HTTPException(404, f"no such file: /vendor/{name}")
-        path, media_type = VENDOR[name]
+        path, media_type, hint = vendor_files()[name]
         if not path.is_file():
-            raise HTTPException(503, f"{path} is not installed: {INSTALL_HINT}")
+            raise HTTPException(503, f"{path} is not installed: {hint}")
         return FileResponse(
             path, media_type=media_type, headers={"Cache-Control": "public, max-age=86400"}
         )

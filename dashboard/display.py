@@ -37,16 +37,14 @@ class Display:
         recording: Path | None = None,
     ) -> Display:
         """Serve the page on ``host:port`` (:class:`~dashboard.server.ServeError` if taken)."""
-        from dashboard.app import INSTALL_HINT, AppSettings, create_app, missing_vendor
+        from dashboard.app import AppSettings, create_app, missing_vendor
         from dashboard.hub import Hub
         from dashboard.server import Server
 
         missing = missing_vendor()
         if missing:
             LOG.warning(
-                "dashboard: the page's charts will not draw: %s not installed (%s)",
-                ", ".join(str(path) for path in missing),
-                INSTALL_HINT,
+                "dashboard: the page's charts will not draw: not installed: %s", "; ".join(missing)
             )
         hub = Hub(team or "", geometry, recording=recording)
         server = Server(create_app(hub, AppSettings(token=token)), host, port).start()

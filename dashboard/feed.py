@@ -18,12 +18,16 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 
-import zenoh
-
 from agent.config import MAX_ROBOTS
 from agent.process import RejectLog
 from agent.protocol import DecodeError, Keys
-from agent.zenoh_session import ZenohSettings, open_session, watch_liveliness
+from agent.zenoh_session import (
+    ZenohSettings,
+    fifo_subscriber,
+    open_session,
+    take,
+    watch_liveliness,
+)
 from dashboard.channels import decode_on, team_wildcard
 
 POLL_S = 0.02
@@ -93,8 +97,7 @@ class LiveFeed:
         if self._session is None:
             self._session = open_session(self.settings)
         for key in self.subscriptions:
-            fifo = zenoh.handlers.FifoChannel(FIFO_CAPACITY)
-            self._fifos.append(self._session.declare_subscriber(key, fifo))
+            self._fifos.append(fifo_subscriber(self._session, key, FIFO_CAPACITY))
         self._subscribers.extend(self._fifos)
         if self.on_liveliness is not None:
             tokens = self._tokens
@@ -132,10 +135,7 @@ class LiveFeed:
         arrived, stamp = time.monotonic(), time.time_ns()
         keys, rejects = self.keys, self.rejects
         for fifo in self._fifos:
-            for _ in range(FIFO_CAPACITY):  # what it held when reached, at most
-                sample = fifo.try_recv()
-                if sample is None:
-                    break
+            for sample in take(fifo, FIFO_CAPACITY):  # what it held when reached, at most
                 key = str(sample.key_expr)
                 try:
                     message = decode_on(keys, key, sample.payload.to_bytes())

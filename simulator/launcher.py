@@ -48,8 +48,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-import zenoh
-
 from agent.children import Child, describe_exit, free_port, stop_all, wait_all
 from agent.config import to_toml
 from agent.faults import FaultSettings
@@ -68,7 +66,13 @@ from agent.protocol import (
     decode,
     encode,
 )
-from agent.zenoh_session import SessionError, ZenohSettings, open_session
+from agent.zenoh_session import (
+    SessionError,
+    ZenohSettings,
+    fifo_subscriber,
+    open_session,
+    take,
+)
 from simulator.history import History
 from simulator.inprocess import RunOutcome, Sample
 from simulator.scenario import Scenario, scenario_to_toml
@@ -226,7 +230,7 @@ class Collector:
         ]
 
     def _subscribe(self, session, key: str, kind: type):
-        return kind, session.declare_subscriber(key, zenoh.handlers.FifoChannel(FIFO_CAPACITY))
+        return kind, fifo_subscriber(session, key, FIFO_CAPACITY)
 
     def drain(self, timeout: float) -> None:
         """Handle what has arrived, waiting up to ``timeout`` for something to: the truth
@@ -236,10 +240,7 @@ class Collector:
         while True:
             handled = 0
             for kind, subscriber in self._subscribers:
-                for _ in range(FIFO_CAPACITY):
-                    sample = subscriber.try_recv()
-                    if sample is None:
-                        break
+                for sample in take(subscriber, FIFO_CAPACITY):
                     self._handle(kind, sample.payload.to_bytes())
                     handled += 1
             left = deadline - time.monotonic()

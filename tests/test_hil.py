@@ -86,7 +86,7 @@ class Candump:
 HIL_RUN_S = 1.5
 """Simulated seconds of the paper's scenario run over vcan: the kick and Steps 1-3 under way.
 In User-Mode Linux a tick's command came back in 89 ms (p50) and 588 ms (p99) in one run
-here, and ticks of 3 s and more were seen in CI, so the whole scenario (1077 ticks, converged
+here, and in CI's guest ticks waited 2.7-4.3 s, so the whole scenario (1077 ticks, converged
 at 10.77 s) is a manual run: ``heft vcan -- heft run simulator/scenarios/paper.toml --can``."""
 HIL_STALL_S = 120.0
 """No new truth for this long stalls the run: ticks of several seconds were seen there."""
