@@ -132,9 +132,10 @@ class BridgeRig:
         self.children[name] = child
         return child
 
-    def start(self, timeout_s: float = 90.0) -> None:
+    def start(self, timeout_s: float = 180.0) -> None:
         """Start every process and wait until the bridge reports and the agent answers;
-        :class:`RigError` if one ends or ``timeout_s`` passes first."""
+        :class:`RigError` if one ends or ``timeout_s`` passes first (generous: in User-Mode
+        Linux one ``heft bridge`` took over 60 s just to start and read its config, once)."""
         deadline = time.monotonic() + timeout_s
         self._start("router", ["-m", "agent", "router", "--listen", self.router])
         config = self.folder / "robot-1.toml"
@@ -156,7 +157,7 @@ class BridgeRig:
         self.start_agent(deadline - time.monotonic())
         self.wait_status(lambda s: True, deadline - time.monotonic(), "the bridge reports")
 
-    def start_agent(self, timeout_s: float = 60.0) -> None:
+    def start_agent(self, timeout_s: float = 120.0) -> None:
         """Start the echo agent (again) and wait until it answers."""
         agent = self._start(
             "echo agent",

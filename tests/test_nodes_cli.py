@@ -18,7 +18,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import re
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -622,3 +625,20 @@ def test_a_robot_toml_can_name_a_zenoh_config_file(tmp_path: Path) -> None:
     path.write_text(JSON5, encoding="utf-8")
     config = load_config_text(toml_text(BASE, zenoh={"config_file": str(path)}))
     assert config.zenoh.config_file == str(path)
+
+
+def test_a_bridge_config_is_refused_in_one_line_before_the_bus(tmp_path: Path) -> None:
+    """``heft bridge`` as a process, with an empty CAN channel: exit 2 and one line on stderr
+    that names the key, before any bus is opened (so no vcan is needed)."""
+    path = tmp_path / "robot.toml"
+    path.write_text('robot = 1\nn = 2\nneighbours = [2]\n[can]\nchannel = ""\n', "utf-8")
+    done = subprocess.run(
+        [sys.executable, "-m", "agent", "bridge", "--config", str(path)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert "can.channel" in done.stderr
