@@ -118,6 +118,19 @@ def _union_coercer(tp: Any) -> Coercer:
     args = typing.get_args(tp)
     optional = type(None) in args
     choices = [_coercer(arg) for arg in args if arg is not type(None)]
+    if optional and len(choices) == 1:  # X | None, the common case: no exception handling
+        (only,) = choices
+
+        def check_optional(value: Any, key: Key) -> Any:
+            if value is None:
+                return None
+            try:
+                return only(value, key)
+            except ConfigError:
+                expected = _type_name(tp)
+                raise ConfigError(f"{_key(key)}: expected {expected}, got {value!r}") from None
+
+        return check_optional
 
     def check(value: Any, key: Key) -> Any:
         if value is None and optional:
@@ -148,9 +161,14 @@ def _tuple_coercer(tp: Any) -> Coercer:
     n = len(items)
 
     def check(value: Any, key: Key) -> Any:
-        # The common case first: a vector of n finite floats (the protocol's every point).
+        # The common case first: a vector of n finite floats (the protocol's every point);
+        # x - x == 0.0 holds for every finite float and for no NaN or infinity.
         if floats and type(value) is list and len(value) == n:
-            if all(type(v) is float for v in value) and all(map(math.isfinite, value)):
+            if n == 2:
+                x, y = value
+                if type(x) is float and type(y) is float and x - x == 0.0 and y - y == 0.0:
+                    return (x, y)
+            elif all(type(v) is float for v in value) and all(map(math.isfinite, value)):
                 return tuple(value)
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"{_key(key)}: expected {_type_name(tp)}, got {value!r}")
@@ -204,10 +222,23 @@ def _fields(cls: type) -> dict[str, dataclasses.Field]:
     return {f.name: f for f in dataclasses.fields(cls)}
 
 
+# The shapes of the fields that :func:`_from_table` checks inline (every decoded protocol
+# message is mostly these; a value that does not fit its shape's common case goes to the
+# field's coercer, which accepts or explains it).
+_FLOAT, _INT, _OPTIONAL_FLOAT, _VECTOR, _OPTIONAL_VECTOR = 1, 2, 3, 4, 5
+_SHAPES = {
+    float: _FLOAT,
+    int: _INT,
+    float | None: _OPTIONAL_FLOAT,
+    tuple[float, float]: _VECTOR,
+    tuple[float, float] | None: _OPTIONAL_VECTOR,
+}
+
+
 @functools.cache
-def _table_plan(cls: type) -> tuple[tuple[str, Coercer, str, bool], ...]:
-    """Per field of dataclass ``cls``: its name, coercer, key suffix and whether it is
-    required (built once per class)."""
+def _table_plan(cls: type) -> tuple[tuple[str, Coercer, str, bool, int], ...]:
+    """Per field of dataclass ``cls``: its name, coercer, key suffix, whether it is required
+    and its shape (0 unless one of :data:`_SHAPES`) (built once per class)."""
     hints = _hints(cls)
     return tuple(
         (
@@ -215,6 +246,7 @@ def _table_plan(cls: type) -> tuple[tuple[str, Coercer, str, bool], ...]:
             _coercer(hints[name]),
             f".{name}",
             f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
+            _SHAPES.get(hints[name], 0),
         )
         for name, f in _fields(cls).items()
     )
@@ -245,9 +277,29 @@ def _from_table(cls: type[T], table: Any, where: Key) -> T:
             f"{_key(where)}.{unknown[0]}: unknown key (expected one of: {', '.join(_fields(cls))})"
         )
     values = {}
-    for name, check, suffix, required in _table_plan(cls):
+    for name, check, suffix, required, shape in _table_plan(cls):
         if name in table:
-            values[name] = check(table[name], (where, suffix))
+            v = table[name]
+            # x - x == 0.0 holds for every finite float and for no NaN or infinity; an int
+            # here is never a bool (type(True) is bool).
+            if shape:
+                if shape == _FLOAT or (shape == _OPTIONAL_FLOAT and v is not None):
+                    if type(v) is float and v - v == 0.0:
+                        values[name] = v
+                        continue
+                elif shape == _INT:
+                    if type(v) is int:
+                        values[name] = v
+                        continue
+                elif v is None and shape != _VECTOR:
+                    values[name] = None
+                    continue
+                elif shape >= _VECTOR and type(v) is list and len(v) == 2:
+                    x, y = v
+                    if type(x) is float and type(y) is float and x - x == 0.0 and y - y == 0.0:
+                        values[name] = (x, y)
+                        continue
+            values[name] = check(v, (where, suffix))
         elif required:
             hint = _type_name(_hints(cls)[name])
             raise ConfigError(f"{_key(where)}{suffix}: missing (expected {hint})")

@@ -2,10 +2,9 @@
 
 ========================== ==============================================================
 ``GET /``                   the page (``dashboard/static/``)
-``GET /vendor/uplot.js``    the time charts' library (and ``uplot.css``), installed from the
-                            npm registry into ``dashboard/node_modules`` by ``make``
-``GET /vendor/plotly.js``   the other charts' library, served from the installed ``plotly``
-                            package (no CDN for either: robots run offline)
+``GET /vendor/uplot.js``    the charting library (and ``uplot.css``), installed from the npm
+                            registry into ``dashboard/node_modules`` by ``make`` (no CDN:
+                            robots run offline)
 ``GET /api/snapshot``       the latest state: per robot phase, m̂, Ĵ, ``contact_to_com``,
                             ``relative_positions``; each link's health; the truth if known
 ``GET /api/summary``        the final table of estimates against truth (404 before)
@@ -37,7 +36,6 @@ import hmac
 import logging
 import time
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Literal
 
@@ -91,13 +89,11 @@ NPM_HINT = "run make, or npm ci --prefix dashboard"
 
 @functools.cache
 def vendor_files() -> dict[str, tuple[Path, str, str]]:
-    """The charting libraries' files the page loads from ``/vendor/``: each one's path, media
+    """The charting library's files the page loads from ``/vendor/``: each one's path, media
     type, and how to install it."""
-    plotly = Path(str(resources.files("plotly") / "package_data" / "plotly.min.js"))
     return {
         "uplot.js": (UPLOT / "uPlot.iife.min.js", "text/javascript", NPM_HINT),
         "uplot.css": (UPLOT / "uPlot.min.css", "text/css", NPM_HINT),
-        "plotly.js": (plotly, "text/javascript", "pip install plotly"),
     }
 
 

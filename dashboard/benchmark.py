@@ -53,6 +53,8 @@ class BenchSettings:
 class BenchReport:
     settings: BenchSettings
     cpu_pct: float = math.nan
+    received_hz: float = math.nan
+    """Messages the dashboard took in per second during the CPU measurement."""
     latency_ms: list[float] = field(default_factory=list)
     server_ms: list[float] = field(default_factory=list)
     """Of the latency, the part until the frame left the server."""
@@ -90,7 +92,9 @@ class BenchReport:
             f"dashboard benchmark: {s.robots} robots' estimates at {s.rate_hz:g} Hz,"
             f" {s.browsers} browser(s), {s.seconds:g} s",
             f"  dashboard CPU: {self.cpu_pct:.1f} % of one core"
-            f" (goal < {GOALS['cpu_pct']:g} %: {ok[verdict['cpu_pct']]})",
+            f" (goal < {GOALS['cpu_pct']:g} %: {ok[verdict['cpu_pct']]})"
+            f" for {self.received_hz:.0f} messages/s"
+            f" ({1e4 * self.cpu_pct / self.received_hz:.0f} µs of CPU each)",
             f"  publish -> browser latency: p50 {self.percentile(self.latency_ms, 0.5):.0f} ms,"
             f" p99 {p99:.0f} ms over {len(self.latency_ms)} samples"
             f" (goal p99 < {GOALS['latency_p99_ms']:g} ms: {ok[verdict['latency_p99_ms']]});"
@@ -245,9 +249,12 @@ def measure_live(settings: BenchSettings, report: BenchReport, sync_playwright) 
                 for page in pages:
                     page.evaluate("window.heft.receipts.length = 0")
                 cpu0, wall0 = cpu_seconds(dashboard.pid), time.monotonic()
+                received0 = received(url)
                 time.sleep(settings.seconds)
                 cpu1, wall1 = cpu_seconds(dashboard.pid), time.monotonic()
+                received1 = received(url)
                 report.cpu_pct = 100.0 * (cpu1 - cpu0) / (wall1 - wall0)
+                report.received_hz = (received1 - received0) / (wall1 - wall0)
                 for page in pages:
                     receipts = page.evaluate("window.heft.receipts")
                     report.chart_ms += page.evaluate("window.heft.chartMs")
@@ -261,6 +268,15 @@ def measure_live(settings: BenchSettings, report: BenchReport, sync_playwright) 
             if thread.is_alive():
                 thread.join()
             stop(dashboard)
+
+
+def received(url: str) -> int:
+    """How many messages the dashboard at ``url`` has taken in (``GET /api/snapshot``)."""
+    import json
+    import urllib.request
+
+    with urllib.request.urlopen(f"{url.rstrip('/')}/api/snapshot", timeout=10) as response:
+        return sum(json.load(response)["received"].values())
 
 
 def latencies(receipts: list, published: dict[int, float]) -> tuple[list[float], list[float]]:

@@ -132,7 +132,7 @@ class Hub:
         now = self.now()
         with self.lock:
             series = self.state.all_series()
-            scene = self.state.scene(now)
+            scene = self.state.page_scene(now)
         return {
             "type": "hello",
             "epoch": self.epoch,

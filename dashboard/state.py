@@ -410,7 +410,7 @@ class TeamState:
         """The new chart points since the previous frame and the scene at ``now``."""
         fresh, self._fresh = self._fresh, {}
         points = {trace: list(p) for trace, p in fresh.items()}
-        return {"type": "frame", "points": points, "scene": self.scene(now)}
+        return {"type": "frame", "points": points, "scene": self.page_scene(now)}
 
     def all_series(self) -> dict[str, list]:
         """Every chart trace's kept points (a page that connects starts from these; the next
@@ -629,10 +629,38 @@ class TeamState:
             "rejected": {f"{what}: {why}": count for (what, why), count in self.rejected.items()},
         }
 
+    def page_scene(self, now: float) -> dict:
+        """The scene as the page draws it (its frames carry it ~20 times a second): what
+        :meth:`scene` holds, less what the page does not show (per robot only its phase, tick,
+        segments and liveliness; the table's rows without ω, ``ẑ_C`` and ``ẑ_ij``)."""
+        scene = self.scene(now)
+        scene["robots"] = {
+            i: {key: view[key] for key in _PAGE_ROBOT} for i, view in scene["robots"].items()
+        }
+        table = scene["table"]  # the final table itself, once there is one: not changed
+        truth = table["truth"]
+        scene["table"] = {
+            "final": table["final"],
+            "t": table["t"],
+            "robots": {
+                i: {key: row[key] for key in _PAGE_ROW if key in row}
+                for i, row in table["robots"].items()
+            },
+            "truth": None if truth is None else {"mass": truth["mass"], "moment": truth["moment"]},
+        }
+        for key in _NOT_ON_PAGE:
+            del scene[key]
+        return scene
+
     def snapshot(self, now: float) -> dict:
         """``GET /api/snapshot``: the scene (per robot: phase, m̂, Ĵ, ``contact_to_com``,
         ``relative_positions``; the links' health; the truth when known)."""
         return self.scene(now)
+
+
+_PAGE_ROBOT = ("phase", "tick", "segments", "alive")
+_PAGE_ROW = ("phase", "mass", "moment", "contact_to_com", "errors")
+_NOT_ON_PAGE = ("truth", "plant", "received", "rejected")
 
 
 def _truth_row(truth: Truth | None) -> dict | None:

@@ -93,12 +93,10 @@ def test_the_page_and_the_charting_libraries_are_served(paper_run) -> None:
     with TestClient(create_app(fed_hub(paper_run, upto=1))) as client:
         page = client.get("/")
         assert page.status_code == 200
-        for path in ("vendor/plotly.js", "vendor/uplot.js", "vendor/uplot.css"):
+        for path in ("vendor/uplot.js", "vendor/uplot.css"):
             assert path in page.text
+        assert "plotly" not in page.text
         assert client.get("/static/dashboard.js").status_code == 200
-        library = client.get("/vendor/plotly.js")
-        assert library.status_code == 200 and len(library.content) > 1_000_000
-        assert b"plotly.js" in library.content[:2000]
         uplot = client.get("/vendor/uplot.js")  # installed by make from the npm registry
         assert uplot.status_code == 200, uplot.text
         assert uplot.headers["content-type"].startswith("text/javascript")
@@ -113,7 +111,7 @@ def test_the_page_and_the_charting_libraries_are_served(paper_run) -> None:
 def test_a_token_guards_every_endpoint(paper_run) -> None:
     app = create_app(fed_hub(paper_run, upto=5), AppSettings(token="s3cret"))
     with TestClient(app) as client:
-        for path in ("/", "/api/snapshot", "/api/summary", "/vendor/plotly.js", "/static/x"):
+        for path in ("/", "/api/snapshot", "/api/summary", "/vendor/uplot.js", "/static/x"):
             response = client.get(path)
             assert response.status_code == 401, path
             assert "token is required" in response.json()["detail"]

@@ -101,9 +101,8 @@ class PaperTeam:
 TOP_SAMPLER = """() => {
   window.topSamples = [];
   setInterval(() => {
-    const top = document.getElementById("top");
-    const contacts = (top.data || []).find((t) => t.name === "contacts");
-    if (contacts) window.topSamples.push([contacts.x[0], contacts.y[0]]);
+    const contact = window.heft.views.top.lines().find((t) => t.name === "contact 1");
+    if (contact) window.topSamples.push([contact.x[0], contact.y[0]]);
   }, 100);
 }"""
 CHART_ENDS = """(name) => window.heft.charts[name].lines().map((t) => ({
@@ -199,10 +198,8 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
                 assert len({tuple(s) for s in samples}) >= 3, samples
                 assert math.dist(samples[0], samples[-1]) > 0.1
                 # The phase timeline reached "done" for every robot.
-                phases = page.evaluate(
-                    "document.getElementById('chart-phases').data.map((t) => [t.name, t.y])"
-                )
-                done = dict(phases)["done"]
+                segments = page.evaluate("window.heft.views.timeline.lines().map((t) => t.name)")
+                done = [name.removeprefix("done ") for name in segments if name.startswith("done ")]
                 assert sorted(done) == [f"robot {i}" for i in range(1, 5)]
                 assert page.inner_text("#table-title").startswith("final")
                 SCREENSHOT.parent.mkdir(exist_ok=True)

@@ -5,7 +5,9 @@ bounded and wary of bad input."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import json
 import math
 
 import pytest
@@ -94,6 +96,31 @@ def test_the_charts_converge_to_the_truth_and_the_final_table_is_the_runs(paper_
     assert top["source"] == "truth" and len(top["outline"]) == len(scenario.body.polygon)
     for robot, com in top["com_estimates"].items():
         assert math.dist(com, top["com"]) < 1e-3, robot
+
+
+def test_the_pages_scene_is_the_scene_less_what_the_page_does_not_draw(paper_run) -> None:
+    scenario, outcome = paper_run
+    state = TeamState("paper", LoadGeometry.from_scenario(scenario))
+    feed(state, outcome)
+    final = copy.deepcopy(state.final)
+    scene, page = state.scene(200.0), state.page_scene(200.0)
+    assert state.final == final  # the final table is read, never trimmed in place
+    assert len(json.dumps(page)) < len(json.dumps(scene)) / 2
+    for key in ("truth", "plant", "received", "rejected"):
+        assert key in scene and key not in page
+    for key in ("top", "links", "alarms", "switches", "phases", "n", "t", "team"):
+        assert page[key] == scene[key]
+    for i in ("1", "2", "3", "4"):
+        full, drawn = scene["robots"][i], page["robots"][i]
+        assert drawn == {k: full[k] for k in ("phase", "tick", "segments", "alive")}
+        row = page["table"]["robots"][i]
+        assert row["errors"] == final["robots"][i]["errors"]
+        assert (row["mass"], row["moment"]) == (
+            final["robots"][i]["mass"],
+            final["robots"][i]["moment"],
+        )
+    assert page["table"]["final"] and page["table"]["t"] == final["t"]
+    assert page["table"]["truth"] == {"mass": 5.0, "moment": final["truth"]["moment"]}
 
 
 def test_a_lost_message_of_the_final_instant_moves_it_to_the_next_complete_one(paper_run) -> None:

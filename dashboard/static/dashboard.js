@@ -1,6 +1,5 @@
-// The team dashboard's page: a WebSocket of frames from the server (dashboard/app.py), the
-// time charts drawn with uPlot, the phase timeline, top view and graph with Plotly (both
-// served by the app: uPlot installed from the npm registry, Plotly from the plotly package).
+// The team dashboard's page: a WebSocket of frames from the server (dashboard/app.py), every
+// chart and view drawn with uPlot (installed from the npm registry, served by the app).
 //
 // Memory is bounded: a time chart keeps at most MAX_COLUMNS instants (the server sends at most
 // MAX_POINTS points per trace), and the points that arrive while paused wait in the same
@@ -8,7 +7,7 @@
 "use strict";
 
 const MAX_POINTS = 3000;
-const CHART_EVERY_MS = 100; // time charts redraw at most 10 times a second
+const CHART_EVERY_MS = 200; // time charts redraw at most 5 times a second
 const SCENE_EVERY_MS = 200; // top view and table at most 5 times a second
 const SLOW_EVERY_MS = 1000; // graph and timeline: on a change, else once a second
 const RECEIPTS = 5000; // frames' arrival times and redraw times kept, for measurements
@@ -25,25 +24,11 @@ const HEALTH_COLOURS = {
   ok: "#3fb950", late: "#d29922", silent: "#f85149", lost: "#f85149", ended: "#6e7681",
 };
 const TRUTH_COLOUR = "#f0f3f6";
-const PLOT_CONFIG = { displaylogo: false, responsive: true, scrollZoom: true,
-  modeBarButtonsToRemove: ["select2d", "lasso2d", "toImage"] };
-
 function colour(robot) { return COLOURS[(robot - 1) % COLOURS.length]; }
 function dash(robot) { return robot > COLOURS.length ? "dash" : "solid"; }
 function token() { return new URLSearchParams(location.search).get("token"); }
 function fmt(value, digits) {
   return value === null || value === undefined ? "–" : Number(value).toFixed(digits);
-}
-
-function baseLayout(extra) {
-  return Object.assign({
-    paper_bgcolor: "rgba(0,0,0,0)", plot_bgcolor: "rgba(0,0,0,0)",
-    font: { color: "#d8dde6", size: 11 },
-    margin: { l: 48, r: 8, t: 6, b: 28 },
-    showlegend: false, uirevision: "keep", hovermode: "closest",
-    xaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150", title: { text: "t (s)", standoff: 2 } },
-    yaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150" },
-  }, extra || {});
 }
 
 // ------------------------------------------------------------------------ time charts
@@ -152,7 +137,8 @@ class TimeChart {
   }
   flush() {
     if (!this.dirty && !this.rebuild) return;
-    const data = [this.x.slice(), ...this.ys.map((y) => y.slice())];
+    // uPlot reads the arrays themselves: they change only between its redraws, in add()
+    const data = [this.x, ...this.ys];
     const zoomed = this.zoomed();
     this.shown = this.x.length ? [this.x[0], this.x[this.x.length - 1]] : null;
     this.dirty = false;
@@ -179,23 +165,9 @@ class TimeChart {
         { ...AXIS, size: labelWidth, values: tickLabels },
       ],
       series,
-      hooks: { draw: [(u) => this.drawSwitches(u)] },
+      hooks: { draw: [(u) => drawSwitchLines(u, this.switches)] },
     }, data, this.div);
     if (range) this.plot.setScale("x", { min: range[0], max: range[1] });
-  }
-  drawSwitches(u) {
-    // the team's phase switches as dotted vertical lines
-    const ctx = u.ctx, { left, top, width, height } = u.bbox;
-    ctx.save();
-    ctx.lineWidth = devicePixelRatio;
-    ctx.setLineDash([2 * devicePixelRatio, 3 * devicePixelRatio]);
-    for (const [t, colour] of this.switches) {
-      const x = Math.round(u.valToPos(t, "x", true));
-      if (x < left || x > left + width) continue;
-      ctx.strokeStyle = colour;
-      ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
-    }
-    ctx.restore();
   }
   setSwitches(switches) {
     if (JSON.stringify(switches) === JSON.stringify(this.switches)) return;
@@ -251,6 +223,7 @@ const charts = {
 // ------------------------------------------------------------------------ the page's state
 const heft = {
   scene: null, epoch: null, paused: false, frames: 0, receipts: [], charts: charts,
+  views: {}, // the xy views, by name
   lastShape: "", wake: null, socket: null,
   chartMs: [], sceneMs: [], // how long each redraw took (ms), the newest RECEIPTS
 };
@@ -263,83 +236,224 @@ function takePoints(points) {
   }
 }
 
-function switchLines(scene) {
-  const shapes = [];
-  for (const [phase, t] of Object.entries(scene.switches || {})) {
-    if (phase === "excite") continue;
-    shapes.push({ type: "line", yref: "paper", y0: 0, y1: 1, x0: t, x1: t,
-      line: { color: PHASE_COLOURS[phase] || "#888", width: 1, dash: "dot" } });
-  }
-  return shapes;
-}
-
-function drawSwitches(scene) {
+function markSwitches(scene) {
   const switches = Object.entries(scene.switches || {})
     .filter(([phase]) => phase !== "excite")
     .map(([phase, t]) => [t, PHASE_COLOURS[phase] || "#888"]);
   for (const chart of Object.values(charts)) chart.setSwitches(switches);
 }
 
+// ------------------------------------------------------------------------ xy views
+// The phase timeline, the top view and the graph are uPlot charts too, in its xy mode (mode 2:
+// each series has its own x and y arrays). Every segment, outline, arrow and link is a line
+// series, every contact, COM and node a series of points, and a draw hook writes the labels.
+// (As Plotly's SVG, these three views took p50 43-96 ms a redraw in heft bench --dashboard.)
+const NO_LINE = () => null;
+const EVERY_POINT = (u, i) => u.data[i][0].map((_, k) => k);
+
+class XYView {
+  // options: square (a unit as long on both axes), axes (show them), zoom (drag to zoom,
+  // double-click to reset), xLabel, splits and ticks (the y axis' values and their labels),
+  // before (a draw hook run before the labels). show() takes the series' looks, their data,
+  // the extent to show and the labels: [x, y, text, colour, font, dy (px), background].
+  constructor(id, options) {
+    this.div = document.getElementById(id);
+    this.options = options;
+    this.plot = null;
+    this.shape = "";
+    this.series = []; // [{name, stroke, width, dash, points: {size, fill, stroke, width}}]
+    this.data = []; // [[xs, ys]] per series
+    this.extent = { x: [0, 1], y: [0, 1] };
+    this.auto = null; // the ranges last chosen by range(), to tell a zoom from them
+    this.labels = [];
+    new ResizeObserver(() => { if (this.plot) this.plot.setSize(this.size()); }).observe(this.div);
+  }
+  size() {
+    return { width: Math.max(80, this.div.clientWidth), height: Math.max(80, this.div.clientHeight) };
+  }
+  show(series, data, extent, labels) {
+    if (!series.length) return; // uPlot's xy mode needs a series
+    const zoomed = this.zoomed();
+    this.series = series; this.data = data; this.extent = extent; this.labels = labels || [];
+    const shape = JSON.stringify(series);
+    if (!this.plot || shape !== this.shape) {
+      this.shape = shape;
+      this.build();
+    } else {
+      this.plot.batch(() => this.plot.setData([null, ...data], !zoomed));
+    }
+  }
+  zoomed() {
+    if (!this.plot || !this.auto || !this.options.zoom) return false;
+    const { x, y } = this.plot.scales;
+    const off = (a, b) => Math.abs(a - b) > 1e-9 * Math.max(1, Math.abs(b));
+    return off(x.min, this.auto.x[0]) || off(x.max, this.auto.x[1])
+      || off(y.min, this.auto.y[0]) || off(y.max, this.auto.y[1]);
+  }
+  range(axis) {
+    // the extent, widened so that a metre is as long on both axes when square
+    let [x0, x1] = this.extent.x, [y0, y1] = this.extent.y;
+    if (this.options.square) {
+      const box = this.plot ? this.plot.bbox : null;
+      const w = box && box.width ? box.width : this.div.clientWidth;
+      const h = box && box.height ? box.height : this.div.clientHeight;
+      const per = Math.max((x1 - x0) / Math.max(w, 1), (y1 - y0) / Math.max(h, 1));
+      const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+      [x0, x1] = [cx - (per * w) / 2, cx + (per * w) / 2];
+      [y0, y1] = [cy - (per * h) / 2, cy + (per * h) / 2];
+    }
+    this.auto = Object.assign(this.auto || {}, { x: [x0, x1], y: [y0, y1] });
+    return axis === "x" ? [x0, x1] : [y0, y1];
+  }
+  build() {
+    const zoom = this.options.zoom;
+    const range = zoom && this.plot && this.zoomed()
+      ? { x: [this.plot.scales.x.min, this.plot.scales.x.max], y: [this.plot.scales.y.min, this.plot.scales.y.max] }
+      : null;
+    if (this.plot) this.plot.destroy();
+    this.auto = null;
+    const series = [{}];
+    for (const look of this.series) {
+      const points = look.points;
+      series.push({
+        label: look.name, stroke: look.stroke, width: look.width || 1.5, dash: look.dash || null,
+        paths: points ? NO_LINE : undefined,
+        points: points
+          ? { show: false, filter: EVERY_POINT, size: points.size, width: points.width || 1,
+            fill: points.fill, stroke: points.stroke }
+          : { show: false },
+      });
+    }
+    const axes = this.options.axes
+      ? [{ ...AXIS, size: 24, label: this.options.xLabel, labelSize: this.options.xLabel ? 16 : 0,
+        labelFont: AXIS.font, values: tickLabels },
+      { ...AXIS, size: this.options.ticks ? 64 : labelWidth, values: this.options.ticks || tickLabels,
+        splits: this.options.splits }]
+      : [{ show: false }, { show: false }];
+    this.plot = new uPlot({
+      ...this.size(),
+      mode: 2,
+      legend: { show: false },
+      cursor: zoom ? { drag: { x: true, y: true, uni: 20 }, points: { show: false } } : { show: false },
+      scales: {
+        x: { time: false, range: () => this.range("x") },
+        y: { range: () => this.range("y") },
+      },
+      axes,
+      series,
+      hooks: { draw: [(u) => this.drawLabels(u)] },
+    }, [null, ...this.data], this.div);
+    if (range) {
+      this.plot.batch(() => {
+        this.plot.setScale("x", { min: range.x[0], max: range.x[1] });
+        this.plot.setScale("y", { min: range.y[0], max: range.y[1] });
+      });
+    }
+  }
+  drawLabels(u) {
+    if (this.options.before) this.options.before(u);
+    const ctx = u.ctx;
+    ctx.save();
+    ctx.textAlign = "center";
+    ctx.textBaseline = "middle";
+    for (const [x, y, text, colour, font, dy, background] of this.labels) {
+      ctx.font = font || `${Math.round(11 * devicePixelRatio)}px system-ui, sans-serif`;
+      const px = u.valToPos(x, "x", true), py = u.valToPos(y, "y", true) + (dy || 0) * devicePixelRatio;
+      if (background) {
+        const w = ctx.measureText(text).width + 6 * devicePixelRatio, h = 15 * devicePixelRatio;
+        ctx.fillStyle = background;
+        ctx.fillRect(px - w / 2, py - h / 2, w, h);
+      }
+      ctx.fillStyle = colour;
+      ctx.fillText(text, px, py);
+    }
+    ctx.restore();
+  }
+  lines() {
+    // [{name, x, y}] per series, as drawn
+    return this.series.map((look, i) => ({ name: look.name, x: this.data[i][0], y: this.data[i][1] }));
+  }
+}
+
+function widen([lo, hi], margin) {
+  const pad = Math.max(hi - lo, 1e-3) * margin;
+  return [lo - pad, hi + pad];
+}
+function extentOf(data) {
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  for (const [xs, ys] of data) {
+    xs.forEach((x, k) => {
+      if (x === null || ys[k] === null) return;
+      x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, ys[k]); y1 = Math.max(y1, ys[k]);
+    });
+  }
+  return x0 <= x1 ? { x: [x0, x1], y: [y0, y1] } : { x: [-1, 1], y: [-1, 1] };
+}
+function bold(px) { return `bold ${Math.round(px * devicePixelRatio)}px system-ui, sans-serif`; }
+
 // ------------------------------------------------------------------------ the phase timeline
+// A thick line per robot and phase segment, robot 1 on top (y = −robot).
+const timeline = new XYView("chart-phases", {
+  axes: true, zoom: true, xLabel: "t (s)",
+  splits: () => Array.from({ length: heft.timelineRobots || 0 }, (_, k) => -(k + 1)),
+  ticks: (u, splits) => splits.map((v) => `robot ${-v}`),
+  before: (u) => drawSwitchLines(u, heft.timelineSwitches || []),
+});
+
 function drawTimeline(scene) {
-  const byPhase = {};
   const now = scene.t;
   const robots = Object.keys(scene.robots).map(Number).sort((a, b) => a - b);
+  const n = Math.max(scene.n || 0, robots.length, 1);
+  heft.timelineRobots = n;
+  const width = Math.max(3, Math.min(14, (0.6 * timeline.div.clientHeight) / n));
+  const series = [], data = [];
   for (const robot of robots) {
     const segments = scene.robots[robot].segments;
     segments.forEach(([phase, start], k) => {
       const end = k + 1 < segments.length ? segments[k + 1][1] : Math.max(now, start);
-      const bar = byPhase[phase] || (byPhase[phase] = { x: [], base: [], y: [] });
-      bar.base.push(start); bar.x.push(Math.max(end - start, now * 0.002 + 1e-3));
-      bar.y.push(`robot ${robot}`);
+      series.push({ name: `${phase} robot ${robot}`, stroke: PHASE_COLOURS[phase] || "#888", width });
+      data.push([[start, Math.max(end, start + now * 0.002 + 1e-3)], [-robot, -robot]]);
     });
   }
-  const data = scene.phases.filter((p) => byPhase[p]).map((phase) => ({
-    type: "bar", orientation: "h", name: phase, base: byPhase[phase].base,
-    x: byPhase[phase].x, y: byPhase[phase].y, marker: { color: PHASE_COLOURS[phase] },
-    hovertemplate: `${phase} from %{base:.2f} s<extra>%{y}</extra>`,
-  }));
-  Plotly.react("chart-phases", data, baseLayout({
-    barmode: "overlay", showlegend: true, legend: { orientation: "h", y: 1.12, x: 0 },
-    margin: { l: 64, r: 8, t: 18, b: 28 },
-    yaxis: { autorange: "reversed", gridcolor: "#2a2f3a" },
-    shapes: switchLines(scene),
-  }), PLOT_CONFIG);
+  heft.timelineSwitches = Object.entries(scene.switches || {})
+    .filter(([phase]) => phase !== "excite").map(([phase, t]) => [t, PHASE_COLOURS[phase] || "#888"]);
+  put("phase-legend", "innerHTML", scene.phases
+    .map((p) => `<span style="color:${PHASE_COLOURS[p]}">■</span> ${p}`).join(" "));
+  timeline.show(series, data, { x: [0, Math.max(now, 1e-3)], y: [-n - 0.6, -0.4] });
+}
+function drawSwitchLines(u, switches) {
+  // the team's phase switches as dotted vertical lines
+  const ctx = u.ctx, { left, top, width, height } = u.bbox;
+  ctx.save();
+  ctx.lineWidth = devicePixelRatio;
+  ctx.setLineDash([2 * devicePixelRatio, 3 * devicePixelRatio]);
+  for (const [t, colour] of switches) {
+    const x = Math.round(u.valToPos(t, "x", true));
+    if (x < left || x > left + width) continue;
+    ctx.strokeStyle = colour;
+    ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
+  }
+  ctx.restore();
 }
 
 // ------------------------------------------------------------------------ the top view
+const topView = new XYView("top", { square: true, axes: true, zoom: true });
+
 function drawTop(scene) {
   const top = scene.top;
-  document.getElementById("top-source").textContent = top
-    ? (top.source === "truth" ? "world frame, truth and estimates" : "about p_G, estimates only") : "";
+  put("top-source", "textContent", top
+    ? (top.source === "truth" ? "world frame, truth and estimates" : "about p_G, estimates only") : "");
   if (!top) return;
-  const data = [];
+  const series = [], data = [], labels = [];
   if (top.outline) {
     const xs = top.outline.map((p) => p[0]), ys = top.outline.map((p) => p[1]);
     xs.push(xs[0]); ys.push(ys[0]);
-    data.push({ type: "scatter", mode: "lines", name: "load", x: xs, y: ys, fill: "toself",
-      fillcolor: "rgba(120,130,150,0.18)", line: { color: "#8a93a3", width: 1.5 }, hoverinfo: "skip" });
+    series.push({ name: "load", stroke: "#8a93a3", width: 1.5 });
+    data.push([xs, ys]);
   }
+  // The commanded forces as arrows (a shaft, then the head's two strokes from the tip), the
+  // largest a quarter of the load's size: the forces' directions and ratios, not newtons.
   const contacts = top.contacts.map((p, k) => ({ p, robot: k + 1 })).filter((c) => c.p);
-  data.push({ type: "scatter", mode: "markers+text", name: "contacts",
-    x: contacts.map((c) => c.p[0]), y: contacts.map((c) => c.p[1]),
-    text: contacts.map((c) => String(c.robot)), textposition: "top center",
-    marker: { size: 10, color: contacts.map((c) => colour(c.robot)), line: { color: "#000", width: 1 } },
-    hovertemplate: "contact %{text}: (%{x:.3f}, %{y:.3f})<extra></extra>" });
-  const estimates = Object.entries(top.com_estimates || {});
-  data.push({ type: "scatter", mode: "markers", name: "COM estimates",
-    x: estimates.map(([, p]) => p[0]), y: estimates.map(([, p]) => p[1]),
-    text: estimates.map(([r]) => r),
-    marker: { size: 9, symbol: "circle-open", line: { width: 2 },
-      color: estimates.map(([r]) => colour(Number(r))) },
-    hovertemplate: "robot %{text}'s p̂_C: (%{x:.3f}, %{y:.3f})<extra></extra>" });
-  if (top.com) {
-    data.push({ type: "scatter", mode: "markers", name: "COM (truth)", x: [top.com[0]], y: [top.com[1]],
-      marker: { size: 13, symbol: "x-thin", line: { width: 2.5, color: TRUTH_COLOUR } },
-      hovertemplate: "p_C (truth): (%{x:.3f}, %{y:.3f})<extra></extra>" });
-  }
-  // The commanded forces as arrows: a shaft and a two-stroke head, a line trace per robot,
-  // the largest a quarter of the load's size (the forces' directions and ratios, not newtons).
   const forces = Object.entries(top.forces || {});
   const corners = top.outline || contacts.map((c) => c.p);
   const span = (k) => Math.max(...corners.map((p) => p[k])) - Math.min(...corners.map((p) => p[k]));
@@ -355,67 +469,84 @@ function drawTop(scene) {
     const side = (sign) => [tip[0] - head * (u[0] * 0.87 - sign * u[1] * 0.5),
       tip[1] - head * (u[1] * 0.87 + sign * u[0] * 0.5)];
     const [left, right] = [side(1), side(-1)];
-    data.push({ type: "scatter", mode: "lines", name: `force ${robot}`, hoverinfo: "skip",
-      x: [c[0], tip[0], null, left[0], tip[0], right[0]],
-      y: [c[1], tip[1], null, left[1], tip[1], right[1]],
-      line: { color: colour(Number(robot)), width: 2 } });
+    series.push({ name: `force ${robot}`, stroke: colour(Number(robot)), width: 2 });
+    data.push([[c[0], tip[0], left[0], tip[0], right[0]], [c[1], tip[1], left[1], tip[1], right[1]]]);
   }
-  Plotly.react("top", data, baseLayout({
-    margin: { l: 36, r: 8, t: 6, b: 24 }, uirevision: "top",
-    xaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150" },
-    yaxis: { gridcolor: "#2a2f3a", zerolinecolor: "#3a4150", scaleanchor: "x", scaleratio: 1 },
-  }), PLOT_CONFIG);
+  for (const c of contacts) {
+    series.push({ name: `contact ${c.robot}`, points: { size: 11, fill: colour(c.robot), stroke: "#000" } });
+    data.push([[c.p[0]], [c.p[1]]]);
+    labels.push([c.p[0], c.p[1], String(c.robot), "#d8dde6", null, -12]);
+  }
+  for (const [robot, p] of Object.entries(top.com_estimates || {})) {
+    series.push({ name: `COM estimate ${robot}`,
+      points: { size: 10, width: 2, fill: "#1a1d24", stroke: colour(Number(robot)) } });
+    data.push([[p[0]], [p[1]]]);
+  }
+  if (top.com) {
+    series.push({ name: "COM (truth)", points: { size: 6, fill: TRUTH_COLOUR, stroke: TRUTH_COLOUR } });
+    data.push([[top.com[0]], [top.com[1]]]);
+    labels.push([top.com[0], top.com[1], "C", TRUTH_COLOUR, null, 11]);
+  }
+  const extent = extentOf(data);
+  topView.show(series, data, { x: widen(extent.x, 0.08), y: widen(extent.y, 0.08) }, labels);
 }
 
 // ------------------------------------------------------------------------ the graph
+const graph = new XYView("graph", { square: true });
+
 function drawGraph(scene) {
   const n = scene.n || Object.keys(scene.robots).length;
   if (!n) return;
   const at = (i) => [Math.cos(Math.PI / 2 - (2 * Math.PI * (i - 1)) / n),
     Math.sin(Math.PI / 2 - (2 * Math.PI * (i - 1)) / n)];
-  const data = [], annotations = [];
-  // One line trace per health (the links' segments split by nulls), not one per link: with
-  // 16 robots in heft bench --dashboard, a redraw of the graph went from p50 77-96 ms to 42-47.
-  const byHealth = {};
+  const series = [], data = [], labels = [];
   for (const link of scene.links) {
     const [i, j] = link.edge, a = at(i), b = at(j);
-    const info = `${i}–${j}: ${link.health}, age ${link.age_s === null ? "–" : link.age_s.toFixed(2) + " s"}, ${link.rate_hz} msg/s`;
-    const lines = byHealth[link.health] || (byHealth[link.health] = { x: [], y: [], text: [] });
-    lines.x.push(a[0], b[0], null); lines.y.push(a[1], b[1], null); lines.text.push(info, info, null);
+    series.push({ name: `link ${i}-${j}: ${link.health}`, stroke: HEALTH_COLOURS[link.health] || "#888", width: 3 });
+    data.push([[a[0], b[0]], [a[1], b[1]]]);
     if (scene.links.length <= 12) {
-      annotations.push({ x: (a[0] + b[0]) / 2, y: (a[1] + b[1]) / 2, showarrow: false,
-        text: `${link.age_s === null ? "–" : link.age_s.toFixed(2)} s · ${link.rate_hz}/s`,
-        font: { size: 10, color: HEALTH_COLOURS[link.health] || "#888" }, bgcolor: "rgba(17,19,24,0.8)" });
+      labels.push([(a[0] + b[0]) / 2, (a[1] + b[1]) / 2,
+        `${link.age_s === null ? "–" : link.age_s.toFixed(2)} s · ${link.rate_hz}/s`,
+        HEALTH_COLOURS[link.health] || "#888", `${Math.round(10 * devicePixelRatio)}px system-ui, sans-serif`,
+        0, "rgba(17,19,24,0.85)"]);
     }
   }
-  for (const [health, lines] of Object.entries(byHealth)) {
-    data.push({ type: "scatter", mode: "lines", x: lines.x, y: lines.y, text: lines.text,
-      line: { color: HEALTH_COLOURS[health] || "#888", width: 3 }, hoverinfo: "text" });
-  }
-  const ids = Array.from({ length: n }, (_, k) => k + 1);
   const lost = new Set();
   for (const alarm of scene.alarms) {
     const m = /robot\(s\) \[([\d, ]+)\] lost/.exec(alarm.text);
     if (m) m[1].split(",").forEach((r) => lost.add(Number(r)));
   }
-  data.push({ type: "scatter", mode: "markers+text", x: ids.map((i) => at(i)[0]), y: ids.map((i) => at(i)[1]),
-    text: ids.map(String), textfont: { color: "#0c0e12", size: 11 },
-    marker: { size: 24, color: ids.map(colour), line: { width: 3, color: ids.map((i) => (lost.has(i) ? "#f85149" : "#0c0e12")) } },
-    hovertemplate: "robot %{text}<extra></extra>" });
-  Plotly.react("graph", data, baseLayout({
-    margin: { l: 4, r: 4, t: 4, b: 4 }, annotations: annotations, uirevision: "graph",
-    xaxis: { visible: false, range: [-1.35, 1.35] },
-    yaxis: { visible: false, range: [-1.25, 1.25], scaleanchor: "x" },
-  }), { displayModeBar: false, responsive: true });
+  for (let i = 1; i <= n; i++) {
+    const p = at(i);
+    series.push({ name: `robot ${i}`,
+      points: { size: 24, width: 3, fill: colour(i), stroke: lost.has(i) ? "#f85149" : "#0c0e12" } });
+    data.push([[p[0]], [p[1]]]);
+    labels.push([p[0], p[1], String(i), "#0c0e12", bold(11)]);
+  }
+  graph.show(series, data, { x: [-1.3, 1.3], y: [-1.2, 1.2] }, labels);
+}
+heft.views = { timeline, top: topView, graph };
+
+// ------------------------------------------------------------------------ the DOM
+// The page's text is written only when it changed: every write makes the browser restyle and
+// lay out again, and the header is refreshed at every animation frame.
+const written = new Map(); // "id.property" -> the value last written
+
+function put(id, property, value) {
+  const key = `${id}.${property}`;
+  if (written.get(key) === value) return;
+  written.set(key, value);
+  const element = document.getElementById(id);
+  if (property === "background") element.style.background = value;
+  else element[property] = value;
 }
 
 // ------------------------------------------------------------------------ the table
 function drawTable(scene) {
   const table = scene.table;
-  const title = document.getElementById("table-title");
-  title.innerHTML = table.final
+  put("table-title", "innerHTML", table.final
     ? `<span class="final">final</span> estimates against truth (t = ${fmt(table.t, 2)} s)`
-    : "latest estimates against truth";
+    : "latest estimates against truth");
   const rows = [`<tr><th>robot</th><th>phase</th><th>m̂ kg</th><th>Ĵ kg m²</th>`
     + `<th title="|m̂ − m| / m">m %</th><th title="|Ĵ − J| / J">J %</th>`
     + `<th title="‖(p̂_C − p_Ci) − (p_C − p_Ci)‖">c mm</th><th title="max_j ‖ẑ_ij − z_ij‖">z mm</th></tr>`];
@@ -432,50 +563,51 @@ function drawTable(scene) {
     rows.push(`<tr class="truth"><td>truth</td><td></td><td>${fmt(table.truth.mass, 4)}</td>`
       + `<td>${fmt(table.truth.moment, 4)}</td><td colspan="4"></td></tr>`);
   }
-  document.getElementById("table").innerHTML = rows.join("");
+  put("table", "innerHTML", rows.join(""));
 }
 
 // ------------------------------------------------------------------------ header and alarms
 function drawHeader(scene, source) {
-  document.getElementById("team").textContent = scene.team ? `team ${scene.team}` : "";
-  document.getElementById("clock").textContent = `t = ${fmt(scene.t, 2)} s`;
-  const badge = document.getElementById("source");
+  put("team", "textContent", scene.team ? `team ${scene.team}` : "");
+  put("clock", "textContent", `t = ${fmt(scene.t, 2)} s`);
   if (source.mode === "replay") {
     const speed = source.speed === 0 ? "max" : `${source.speed}×`;
-    badge.textContent = `REPLAY ${speed}${source.paused ? " · paused" : ""}${source.finished ? " · end" : ""}`
-      + ` · ${fmt(source.position_s, 1)} s`;
-    badge.className = "badge replay";
+    put("source", "textContent", `REPLAY ${speed}${source.paused ? " · paused" : ""}`
+      + `${source.finished ? " · end" : ""} · ${fmt(source.position_s, 1)} s`);
+    put("source", "className", "badge replay");
   } else {
-    badge.textContent = "LIVE";
-    badge.className = "badge live";
+    put("source", "textContent", "LIVE");
+    put("source", "className", "badge live");
   }
-  document.getElementById("replay-controls").hidden = !source.recording;
-  document.getElementById("replay-toggle").textContent = source.paused ? "▶" : "❚❚";
+  put("replay-controls", "hidden", !source.recording);
+  put("replay-toggle", "textContent", source.paused ? "▶" : "❚❚");
   const phases = {};
   for (const [robot, view] of Object.entries(scene.robots)) {
     if (view.phase) (phases[view.phase] = phases[view.phase] || []).push(robot);
   }
   const names = Object.keys(phases);
-  const chip = document.getElementById("team-phase");
-  chip.textContent = names.length === 1 ? names[0] : names.map((p) => `${p} ${phases[p].join(",")}`).join(" · ") || "–";
-  chip.style.background = names.length === 1 ? PHASE_COLOURS[names[0]] + "55" : "";
-  const box = document.getElementById("alarms");
-  box.hidden = !scene.alarms.length;
-  box.innerHTML = scene.alarms.map((a) => `<div class="alarm ${a.level}">⚠ ${a.text}</div>`).join("");
+  put("team-phase", "textContent",
+    names.length === 1 ? names[0] : names.map((p) => `${p} ${phases[p].join(",")}`).join(" · ") || "–");
+  put("team-phase", "background", names.length === 1 ? PHASE_COLOURS[names[0]] + "55" : "");
+  put("alarms", "hidden", !scene.alarms.length);
+  put("alarms", "innerHTML", scene.alarms.map((a) => `<div class="alarm ${a.level}">⚠ ${a.text}</div>`).join(""));
 }
 
 // ------------------------------------------------------------------------ drawing
-// One drawing job per animation frame, the most overdue first: a page never blocks for longer
-// than its slowest job (so frames keep arriving on time), and each job waits at least BUDGET
-// times its own last duration before it runs again (a big team's charts redraw less often
-// rather than starve the page).
+// The drawing jobs that are due run in an animation frame, the most overdue first, until the
+// frame has taken FRAME_MS: a page never blocks for much longer than its slowest job (so
+// frames from the server keep arriving on time), and jobs due together share a frame (each
+// frame the browser lays out and paints costs as much as a chart's redraw). Each job waits at
+// least BUDGET times its own last duration before it runs again (a big team's charts redraw
+// less often rather than starve the page).
 const BUDGET = 4;
+const FRAME_MS = 12;
 const jobs = [
   ...Object.entries(charts).map(([name, chart]) => ({
     name, every: CHART_EVERY_MS, chart: true, run: () => chart.flush() })),
   { name: "top", every: SCENE_EVERY_MS, run: () => drawTop(heft.scene) },
   { name: "table", every: SCENE_EVERY_MS, run: () => drawTable(heft.scene) },
-  { name: "switches", every: SLOW_EVERY_MS, run: () => drawSwitches(heft.scene) },
+  { name: "switches", every: SLOW_EVERY_MS, run: () => markSwitches(heft.scene) },
   { name: "timeline", every: SLOW_EVERY_MS, changes: true, run: () => drawTimeline(heft.scene) },
   { name: "graph", every: SLOW_EVERY_MS, changes: true, run: () => drawGraph(heft.scene) },
 ];
@@ -487,30 +619,37 @@ function sceneShape(scene) {
 }
 
 function render(force) {
-  const now = performance.now();
+  const frame = performance.now();
   if (!heft.scene) return;
   drawHeader(heft.scene, heft.source);
   if (heft.paused) return;
   const shape = sceneShape(heft.scene);
   const changed = shape !== heft.lastShape;
   heft.lastShape = shape;
-  let next = null, wait = Infinity;
+  const dueAt = (job) => job.last + Math.max(job.every, BUDGET * job.took);
+  const due = [];
   for (const job of jobs) {
     if (force || (changed && job.changes)) job.last = -Infinity;
-    const due = job.last + Math.max(job.every, BUDGET * job.took);
-    if (due <= now && (!next || due < next.due)) next = Object.assign(job, { due });
-    else if (due > now) wait = Math.min(wait, due - now);
+    job.due = dueAt(job);
+    if (job.due <= frame) due.push(job);
   }
-  if (next) {
+  due.sort((a, b) => a.due - b.due);
+  let ran = 0;
+  for (const job of due) {
     const started = performance.now();
-    next.run();
-    next.took = performance.now() - started;
-    next.last = started;
-    (next.chart ? heft.chartMs : heft.sceneMs).push(next.took);
+    if (ran > 0 && started - frame + job.took > FRAME_MS) break;
+    job.run();
+    job.took = performance.now() - started;
+    job.last = started;
+    (job.chart ? heft.chartMs : heft.sceneMs).push(job.took);
+    ran += 1;
+  }
+  if (ran < due.length) {
     schedule();
-  } else if (wait < Infinity) {
+  } else {
+    const wait = Math.min(...jobs.map(dueAt)) - performance.now();
     clearTimeout(heft.wake);
-    heft.wake = setTimeout(schedule, wait);
+    heft.wake = setTimeout(schedule, Math.max(0, wait));
   }
 }
 let scheduled = false;
@@ -552,9 +691,8 @@ function connect() {
   heft.socket = socket;
   socket.onmessage = onMessage;
   socket.onclose = () => {
-    const badge = document.getElementById("source");
-    badge.textContent = "disconnected: retrying";
-    badge.className = "badge down";
+    put("source", "textContent", "disconnected: retrying");
+    put("source", "className", "badge down");
     setTimeout(connect, 1000);
   };
 }
