@@ -19,6 +19,13 @@ Conventions (those of the paper, Sec. II):
 - Tick ``k`` is the instant ``t_k = k / rate_hz``. A force commanded after sample ``k`` is held
   constant (in ``W``) during ``[t_k, t_{k+1}]`` and reported by the measurement of tick ``k + 1``.
 
+Actuators (``scenario.actuators``, ideal by default as in the paper): robot ``i`` commanded
+``u_i`` applies ``f_i`` with ``τ ḟ_i = g_i u_i + w_i − f_i``, integrated exactly per physics
+substep for the target held over the tick (``f ← t + (f − t) e^{−Δt/τ}``); its measurement
+reports ``f_i`` averaged over the tick's substeps (what the load felt), plus the sensor's noise.
+The gains and the actuator noise come from a random stream of their own (:data:`ACTUATOR_STREAM`),
+so a run's sensor noise is the same with actuators ideal or not.
+
 Implementation notes (pymunk 7): the body carries the scenario's mass and moment and has no
 shapes (a shape with a density would override them); space gravity is zero and damping is off;
 ``body.force``/``body.torque`` are cleared by every step, so the held forces are re-applied at
@@ -43,6 +50,8 @@ if TYPE_CHECKING:
     from simulator.scenario import Scenario
 
 _ZERO: Vec2 = (0.0, 0.0)
+ACTUATOR_STREAM = 1
+"""The actuators' random draws are ``default_rng((seed, ACTUATOR_STREAM))``'s."""
 
 
 class Plant:
@@ -82,6 +91,26 @@ class Plant:
         self._commanded: list[Vec2] = [_ZERO] * self._n
         self._applied: tuple[Vec2, ...] = (_ZERO,) * self._n
         self.tick: int = 0
+
+        actuators = scenario.actuators
+        self._ideal = actuators.ideal
+        drives = np.random.default_rng((scenario.run.seed, ACTUATOR_STREAM))
+        if actuators.gains:
+            gains = tuple(float(g) for g in actuators.gains)
+        elif actuators.gain_error_std > 0.0:
+            errors = drives.normal(0.0, actuators.gain_error_std, size=self._n)
+            gains = tuple(np.clip(1.0 + errors, 0.5, 1.5))
+        else:
+            gains = (1.0,) * self._n
+        self.gains: tuple[float, ...] = tuple(float(g) for g in gains)
+        """Each robot's actuator gain ``g_i`` (robot 1 first)."""
+        self._drives = drives
+        self._actuator_noise = float(actuators.force_noise_std)
+        tau = float(actuators.time_constant_s)
+        self._follow = 1.0 - math.exp(-self._dt / tau) if tau > 0.0 else 1.0
+        """How far a drive's force goes towards its target in one substep."""
+        self._drive_force: list[Vec2] = [_ZERO] * self._n
+        """Each drive's force now (with a lag it carries over from one tick to the next)."""
 
     @property
     def n(self) -> int:
@@ -153,6 +182,9 @@ class Plant:
         with ``A = Σ a_i × f_i`` and ``B = Σ a_i · f_i``: the same as applying each force at its
         contact's world point, at two numbers per substep.
         """
+        if not self._ideal:
+            self._advance_through_drives()
+            return
         applied = tuple(self._commanded)
         fx = sum(f[0] for f in applied)
         fy = sum(f[1] for f in applied)
@@ -168,6 +200,44 @@ class Plant:
             body.torque = math.cos(angle) * cross_sum - math.sin(angle) * dot_sum
             step(dt)
         self._applied = applied
+        self.tick += 1
+
+    def _advance_through_drives(self) -> None:
+        """:meth:`advance` with the actuators' lag, gains and noise (see the module docstring):
+        the forces change from substep to substep, so do their sum and torque."""
+        n = self._n
+        if self._actuator_noise > 0.0:
+            noise = self._drives.normal(0.0, self._actuator_noise, size=(n, 2)).tolist()
+        else:
+            noise = [_ZERO] * n
+        targets = [
+            (g * u[0] + w[0], g * u[1] + w[1])
+            for g, u, w in zip(self.gains, self._commanded, noise)
+        ]
+        follow, arms = self._follow, self._arms
+        forces = self._drive_force
+        total = [[0.0, 0.0] for _ in range(n)]
+        body, step, dt = self._body, self._space.step, self._dt
+        for _ in range(self._substeps):
+            forces = [
+                (f[0] + (t[0] - f[0]) * follow, f[1] + (t[1] - f[1]) * follow)
+                for f, t in zip(forces, targets)
+            ]
+            fx = fy = cross_sum = dot_sum = 0.0
+            for a, f, acc in zip(arms, forces, total):
+                fx += f[0]
+                fy += f[1]
+                cross_sum += a[0] * f[1] - a[1] * f[0]
+                dot_sum += a[0] * f[0] + a[1] * f[1]
+                acc[0] += f[0]
+                acc[1] += f[1]
+            angle = body.angle
+            body.force = Vec2d(fx, fy)
+            body.torque = math.cos(angle) * cross_sum - math.sin(angle) * dot_sum
+            step(dt)
+        self._drive_force = forces
+        m = self._substeps
+        self._applied = tuple((acc[0] / m, acc[1] / m) for acc in total)
         self.tick += 1
 
     def truth(self) -> Truth:

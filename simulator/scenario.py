@@ -142,6 +142,48 @@ class Sensors:
 
 
 @dataclass(frozen=True)
+class Actuators:
+    """How each robot's drive applies the force it is commanded (the paper's robots are ideal
+    force sources: these default to that).
+
+    Robot ``i`` commanded ``u_i`` applies ``f_i`` with ``τ ḟ_i = g_i u_i + w_i − f_i``: a
+    first-order lag of time constant ``τ`` (none when 0), a gain ``g_i`` and white actuator
+    noise ``w_i`` (N per axis, drawn once per tick and held over it). The gains are ``gains``
+    when given, else ``1 + ε_i`` with ``ε_i ~ N(0, gain_error_std²)`` drawn once per run from
+    the seed (and kept within [0.5, 1.5]). What a robot measures is the force it applied,
+    averaged over the tick, plus ``sensors.force_noise_std``."""
+
+    time_constant_s: float = bounded(0.0, 0, 1, "s")
+    """``τ`` of the drive's first-order lag; 0: the force follows the command at once."""
+    gain_error_std: float = bounded(0.0, 0, 0.3)
+    """Relative standard deviation of the robots' gains (0.02: 2 %)."""
+    gains: tuple[float, ...] = ()
+    """Each robot's gain ``g_i``, robot 1 first, each in [0.5, 1.5]; when given,
+    ``gain_error_std`` is not used."""
+    force_noise_std: float = bounded(0.0, 0, 100, "N")
+    """N per axis, white, on the applied force (the drive's own noise, not the sensor's)."""
+
+    @property
+    def ideal(self) -> bool:
+        """Whether every robot applies exactly its command (the paper's assumption)."""
+        return (
+            self.time_constant_s == 0.0
+            and self.gain_error_std == 0.0
+            and all(g == 1.0 for g in self.gains)
+            and self.force_noise_std == 0.0
+        )
+
+    def validate(self, where: str) -> None:
+        """Raise :class:`ConfigError` naming the key and its range unless every field is in
+        its range (the number of gains is checked with the scenario)."""
+        check_bounds(self, where)
+        for i, gain in enumerate(self.gains):
+            if not 0.5 <= gain <= 1.5:
+                key = f"{where}.gains[{i}]"
+                raise ConfigError(f"{key}: expected a number in [0.5, 1.5], got {gain!r}")
+
+
+@dataclass(frozen=True)
 class RunSettings:
     """How a run is simulated."""
 
@@ -178,6 +220,7 @@ class Scenario:
     run: RunSettings = RunSettings()
     agent: AgentTuning = AgentTuning()
     description: str = ""
+    actuators: Actuators = Actuators()
 
     @property
     def n(self) -> int:
@@ -369,6 +412,7 @@ _TOP_LEVEL: dict[str, str | None] = {
     "contacts": "a table",
     "graph": "a table",
     "sensors": None,
+    "actuators": None,
     "run": None,
     "agent": None,
 }
@@ -575,7 +619,13 @@ def _parse(data: Any) -> Scenario:
     _check_rates(sensors, run)
     agent = from_table(AgentTuning, data.get("agent", {}), "agent")
     agent.check_period("agent", 1.0 / sensors.rate_hz, f"sensors.rate_hz = {sensors.rate_hz:g}")
-    return Scenario(name, body, contacts, edges, sensors, run, agent, description)
+    actuators = from_table(Actuators, data.get("actuators", {}), "actuators")
+    if actuators.gains and len(actuators.gains) != len(contacts):
+        raise ScenarioError(
+            f"actuators.gains: expected one gain per robot ({len(contacts)}),"
+            f" got {len(actuators.gains)}"
+        )
+    return Scenario(name, body, contacts, edges, sensors, run, agent, description, actuators)
 
 
 def parse_scenario(data: Mapping[str, Any], source: str = "<scenario>") -> Scenario:
@@ -643,7 +693,11 @@ def scenario_to_toml(s: Scenario) -> str:
         lines.append(f"description = {toml_value(s.description)}")
     lines += ["", *_toml_body(s.body), "", "[contacts]", *_toml_points("points", s.contacts)]
     lines += ["", "[graph]", f"edges = {toml_value(s.edges)}"]
-    lines += ["", "[sensors]", *toml_fields(s.sensors), "", "[run]", *toml_fields(s.run)]
+    lines += ["", "[sensors]", *toml_fields(s.sensors)]
+    actuators = toml_fields(s.actuators, only_changed=True)
+    if actuators:
+        lines += ["", "[actuators]", *actuators]
+    lines += ["", "[run]", *toml_fields(s.run)]
     agent = toml_fields(s.agent, only_changed=True)
     if agent:
         lines += ["", "[agent]", *agent]

@@ -33,6 +33,7 @@ from simulator.scenario import (
     MAX_POSITION,
     MAX_VERTICES,
     MIN_DIAMETER,
+    Actuators,
     RunSettings,
     Sensors,
     _BodyTable,
@@ -360,6 +361,7 @@ def _companions(key: str, value: float) -> dict[str, Any]:
 SCENARIO_CASES = [
     *_cases("body", _BodyTable),
     *_cases("sensors", Sensors),
+    *_cases("actuators", Actuators),
     *_cases("run", RunSettings),
     *_cases("agent", AgentTuning),
 ]
@@ -543,6 +545,7 @@ def _readme_limits() -> str:
     [
         ("body", _BodyTable),
         ("sensors", Sensors),
+        ("actuators", Actuators),
         ("run", RunSettings),
         ("agent", AgentTuning),
         ("robot.toml", AgentNodeConfig),

@@ -16,7 +16,7 @@ import pytest
 from agent.estimation.geometry import Vec2
 from agent.protocol import Truth
 from simulator.plant import Plant
-from simulator.scenario import Scenario, Sensors, load_scenario
+from simulator.scenario import Actuators, Scenario, Sensors, load_scenario
 
 PAPER = Path(__file__).resolve().parents[1] / "simulator" / "scenarios" / "paper.toml"
 
@@ -281,3 +281,80 @@ def test_measured_force_is_the_one_applied_last_period(paper: Scenario) -> None:
     after = plant.truth()
     assert after.com_velocity == pytest.approx(before.com_velocity, abs=1e-15)
     assert after.omega == pytest.approx(before.omega, abs=1e-15)
+
+
+# --- 7. actuators -------------------------------------------------------------------------------
+
+
+def with_actuators(scenario: Scenario, **settings) -> Scenario:
+    return replace(scenario, actuators=Actuators(**settings))
+
+
+def test_a_lagging_drive_follows_its_command_exponentially(paper: Scenario) -> None:
+    tau = 0.02
+    plant = Plant(with_actuators(paper, time_constant_s=tau))
+    u = (4.0, -2.0)
+    plant.command(1, u)
+    period, substeps = paper.period_s, paper.substeps
+    dt = period / substeps
+    for k in range(1, 11):
+        before = plant.truth()
+        plant.advance()
+        after = plant.truth()
+        measured = plant.measure()[0].force
+        # The drive's force at substep j of the run is u (1 − e^{−j Δt/τ}); the measurement
+        # is its mean over the tick's substeps.
+        steps = range((k - 1) * substeps + 1, k * substeps + 1)
+        share = sum(1.0 - math.exp(-j * dt / tau) for j in steps) / substeps
+        assert measured == pytest.approx((u[0] * share, u[1] * share), rel=1e-12)
+        # ... and what the load felt: its momentum grew by the measured force times the tick.
+        gained = sub(after.com_velocity, before.com_velocity)
+        impulse = (measured[0] * period / paper.body.mass, measured[1] * period / paper.body.mass)
+        assert gained == pytest.approx(impulse, rel=1e-9)
+    assert measured[0] < u[0]  # after 5 time constants, still short of the command
+    assert measured[0] > 0.99 * u[0]
+
+
+def test_gains_scale_what_a_robot_applies(paper: Scenario) -> None:
+    gains = (0.9, 1.1, 1.0, 1.25)
+    plant = Plant(with_actuators(paper, gains=gains))
+    assert plant.gains == gains
+    for robot in range(1, 5):
+        plant.command(robot, (1.0, 2.0))
+    plant.advance()
+    for meas, g in zip(plant.measure(), gains, strict=True):
+        assert meas.force == pytest.approx((g, 2 * g), rel=1e-12)
+    # Drawn from the seed when not given: within [0.5, 1.5], the same for the same seed.
+    drawn = Plant(with_actuators(paper, gain_error_std=0.02)).gains
+    assert drawn == Plant(with_actuators(paper, gain_error_std=0.02)).gains
+    assert len(set(drawn)) == 4 and all(0.9 < g < 1.1 for g in drawn)
+
+
+def test_actuator_noise_is_on_the_applied_force_and_leaves_the_sensor_noise_alone(
+    moving: Scenario,
+) -> None:
+    sensors = Sensors(rate_hz=moving.sensors.rate_hz, velocity_noise_std=0.01)
+    scenario = replace(moving, sensors=sensors)
+    noisy = with_actuators(scenario, force_noise_std=0.3)
+    plants = Plant(scenario), Plant(noisy)
+    forces, velocity_noise = [], ([], [])
+    for _ in range(2000):
+        for plant in plants:
+            plant.command(1, (0.5, 0.25))
+            plant.advance()
+        for k, plant in enumerate(plants):
+            measured = plant.measure()[0]  # once a tick: each call draws the sensors' noise
+            velocity_noise[k].append(sub(measured.velocity, plant.truth().contact_velocities[0]))
+        forces.append(sub(measured.force, (0.5, 0.25)))
+    errors = np.array(forces)
+    for axis in (0, 1):
+        assert errors[:, axis].std() == pytest.approx(0.3, rel=0.1)
+    # The sensors' noise is drawn from its own stream: the same with the drives noisy or not.
+    assert np.allclose(velocity_noise[0], velocity_noise[1], rtol=0, atol=1e-12)
+
+
+def test_ideal_actuators_are_the_papers(paper: Scenario) -> None:
+    assert paper.actuators.ideal and Actuators(gains=(1.0,) * 4).ideal
+    assert not Actuators(time_constant_s=0.01).ideal
+    plant = Plant(paper)
+    assert plant.gains == (1.0,) * paper.n

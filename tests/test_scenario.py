@@ -318,6 +318,21 @@ INVALID = [
     ("negative seed", put("run.seed", -1), "run.seed", "non-negative"),
     ("float seed", put("run.seed", 1.5), "run.seed", "integer"),
     ("bad agent value", put("agent.max_force", -1.0), "agent.max_force", "positive"),
+    (
+        "negative lag",
+        put("actuators.time_constant_s", -0.01),
+        "actuators.time_constant_s",
+        "[0, 1] s",
+    ),
+    ("gain error", put("actuators.gain_error_std", 0.5), "actuators.gain_error_std", "[0, 0.3]"),
+    (
+        "a gain per robot",
+        put("actuators.gains", [1.0, 1.0]),
+        "actuators.gains",
+        "one gain per robot",
+    ),
+    ("gain out of range", put("actuators.gains", [1, 1, 2, 1]), "actuators.gains[2]", "[0.5, 1.5]"),
+    ("unknown actuator key", put("actuators.delay_s", 0.1), "actuators.delay_s", "unknown key"),
 ]
 
 
@@ -418,7 +433,9 @@ def test_round_trip_of_every_option() -> None:
     data["sensors"] = {"rate_hz": 50.0, "velocity_noise_std": 1e-3, "force_noise_std": 0.02}
     data["run"] = {"seed": 12, "physics_hz": 1e3, "max_time_s": 1 / 3}
     data["agent"] = {"push_direction": [1.0, 0.0], "switch_margin_ticks": 4}
+    data["actuators"] = {"time_constant_s": 0.02, "gains": [0.98, 1.02, 1.0, 1.01]}
     s = parse_scenario(data)
+    assert s.actuators.gains == (0.98, 1.02, 1.0, 1.01) and not s.actuators.ideal
     assert round_trip(s) == s
 
 
