@@ -5,6 +5,7 @@
     heft bench [SCENARIO] [--repeat N] [--transport zenoh] [--generated N]
     heft sim SCENARIO [--team NAME] [--clock lockstep|realtime] [Zenoh options]
     heft demo [--out FILE] [--plot DIR] [--quiet]
+    heft baseline RECORDING [--velocity-noise S] [--force-noise S] [--out FILE]
 
 Exit status (the README's table): 0 success (``run``: every robot converged), 1 ``run`` did
 not converge (the last line and the results' ``reason`` say why), 2 bad input (a one-line
@@ -609,13 +610,14 @@ def _add_can_options(parser: argparse.ArgumentParser, what: str) -> None:
 
 # ------------------------------------------------------------------------------ the parsers
 def register(commands: argparse._SubParsersAction) -> None:
-    """Add ``heft run``, ``scenario``, ``bench``, ``sim`` and ``demo`` (entry point of the
-    group ``heft.commands``)."""
+    """Add ``heft run``, ``scenario``, ``bench``, ``sim``, ``demo`` and ``baseline`` (entry
+    point of the group ``heft.commands``)."""
     _add_run(commands)
     _add_scenario(commands)
     _add_bench(commands)
     _add_sim(commands)
     _add_demo(commands)
+    _add_baseline(commands)
 
 
 def _add_run(commands: argparse._SubParsersAction) -> None:
@@ -894,3 +896,135 @@ def _add_demo(commands: argparse._SubParsersAction) -> None:
         help="exit when the run ends (default: keep the dashboard up until Ctrl-C)",
     )
     demo.set_defaults(handler=cmd_demo)
+
+
+def _add_baseline(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "baseline",
+        help="the centralized reference: a batch fit of a recording",
+        formatter_class=HelpFormatter,
+        description=(
+            "Fit the load's mass, moment of inertia and every contact's offset to the COM to\n"
+            "all robots' recorded measurements at once (simulator/baseline.py: a batch least-\n"
+            "squares fit of the rigid-body model over the longest stretch of ticks at which\n"
+            "every robot was measured), with standard deviations; print them against the\n"
+            "recorded truth, when there is one. The yardstick of the distributed estimators:\n"
+            "what one computer that saw everything could reach.\n\n"
+            "Exit status: 0 fitted, 1 the fit did not converge, 2 bad recording or arguments."
+        ),
+        epilog=(
+            "examples:\n"
+            "  heft run simulator/scenarios/paper.toml --transport zenoh --record run.mcap\n"
+            "  heft baseline run.mcap --velocity-noise 0.01 --force-noise 0.5\n\n"
+            "The noise is the sensors' (their datasheets, or the scenario's [sensors]); a\n"
+            "noise-free run takes 0 (the weights are then floored at 1e-6 m/s and 1e-4 N)."
+        ),
+    )
+    parser.add_argument("recording", metavar="RECORDING", help="an MCAP recording of a run")
+    parser.add_argument(
+        "--velocity-noise",
+        metavar="S",
+        type=float,
+        required=True,
+        help="σ of the odometry (m/s per axis): the velocities' weight (0 if noise-free)",
+    )
+    parser.add_argument(
+        "--force-noise",
+        metavar="S",
+        type=float,
+        required=True,
+        help="σ of the force sensing (N per axis): the forces' weight (0 if noise-free)",
+    )
+    parser.add_argument("--out", metavar="FILE", help="write the fit as JSON (SI units) to FILE")
+    parser.set_defaults(handler=cmd_baseline)
+
+
+def cmd_baseline(args: argparse.Namespace) -> int:
+    from simulator.baseline import fit, read_recording
+
+    for name in ("velocity_noise", "force_noise"):
+        value = getattr(args, name)
+        if not (0.0 <= value <= 100.0):
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag}: expected a number in [0, 100], got {value!r}")
+    if args.out:
+        check_writable(Path(args.out))
+    try:
+        run = read_recording(args.recording)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    n = run.velocities.shape[1]
+    ticks = run.velocities.shape[0]
+    print(
+        f"baseline: {ticks} ticks of {n} robots ({ticks * run.period_s:.2f} s from tick"
+        f" {run.first_tick}); fitting...",
+        file=sys.stderr,
+    )
+    try:
+        result = fit(
+            run.velocities,
+            run.forces,
+            run.period_s,
+            args.velocity_noise,
+            args.force_noise,
+            run.first_tick,
+        )
+    except ValueError as err:
+        raise UsageError(f"{args.recording}: {err}") from None
+    truth = run.truth
+    lines = [
+        f"baseline of {args.recording}: {result.ticks} ticks, the load turned"
+        f" {result.angle:.2f} rad; weights σ_v {result.velocity_noise:.2g} m/s, σ_f"
+        f" {result.force_noise:.2g} N" + ("" if result.converged else "; NOT CONVERGED"),
+        "",
+        f"{'':10} {'estimate':>10} {'± (1σ)':>10} {'truth':>10} {'error':>10}",
+    ]
+    for label, value, std, true in (
+        ("m [kg]", result.mass, result.mass_std, None if truth is None else truth.mass),
+        ("J [kg m2]", result.moment, result.moment_std, None if truth is None else truth.moment),
+    ):
+        error = "-" if true is None else f"{100 * abs(value - true) / true:.3f} %"
+        true_text = "-" if true is None else f"{true:.5f}"
+        lines.append(f"{label:10} {value:10.5f} {std:10.2g} {true_text:>10} {error:>10}")
+    lines += ["", f"{'robot':>5} {'ctc x [m]':>10} {'ctc y [m]':>10} {'± mm':>8} {'err mm':>8}"]
+    errors = {}
+    for i, (c, std) in enumerate(zip(result.contact_to_com, result.contact_to_com_std), start=1):
+        error = "-"
+        if truth is not None:
+            t = truth.contact_to_com[i - 1]
+            errors[i] = 1000.0 * ((c[0] - t[0]) ** 2 + (c[1] - t[1]) ** 2) ** 0.5
+            error = f"{errors[i]:.2f}"
+        lines.append(f"{i:5} {c[0]:10.4f} {c[1]:10.4f} {1000 * std:8.2f} {error:>8}")
+    lines.append("(ctc = contact_to_com = p_C - p_Ci in the world frame at the last tick fitted)")
+    print("\n".join(lines))
+    if args.out:
+        import dataclasses
+
+        true = None
+        if truth is not None:
+            true = {"tick": truth.tick, "mass": truth.mass, "moment": truth.moment}
+            true["contact_to_com"] = [list(c) for c in truth.contact_to_com]
+        data = {
+            "recording": str(args.recording),
+            "period_s": run.period_s,
+            **dataclasses.asdict(result),
+            "truth": true,
+        }
+        text = json.dumps(_finite_or_null(data), indent=2, allow_nan=False)
+        write_text(Path(args.out), text + "\n")
+    if not result.converged:
+        print(f"{PROG}: the fit did not converge", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _finite_or_null(value):
+    """``value`` with every NaN or infinity (an undetermined standard deviation) as None,
+    for JSON."""
+    if isinstance(value, float):
+        return value if value - value == 0.0 else None
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_null(v) for v in value]
+    return value
