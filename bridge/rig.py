@@ -28,8 +28,10 @@ from bridge.node import STATUS_EVERY_S
 
 LOG_TAIL = 2000
 """Characters of a child's log quoted when it fails."""
-STOP_GRACE_S = 10.0
-"""How long a child has to exit on SIGTERM before SIGKILL."""
+STOP_GRACE_S = 30.0
+"""How long a child has to exit on SIGTERM before SIGKILL. In User-Mode Linux, right after a
+burst of 2000 random frames, a bridge once took over 10 s to get through its backlog and exit
+(the tests check that it exits by itself, with status 0)."""
 
 
 class RigError(Exception):
