@@ -123,6 +123,9 @@ class TeamState:
         self.truth: Truth | None = None
         self.plant: PlantStatus | None = None
         self.truths: dict[int, Truth] = {}
+        self._truth_rows: tuple[Truth | None, dict | None] = (None, None)
+        """The last truth row made and its truth: a scene needs it twice, and a page's frames
+        (~20 a second) ask for the same truth until a new one arrives."""
         self.series: dict[str, deque] = {}
         self._fresh: dict[str, deque] = {}
         """Points added since the last frame, per trace."""
@@ -352,9 +355,17 @@ class TeamState:
             "tick": truth.tick if truth else max((e.tick for e in robots.values()), default=-1),
             "t": self.t(truth.tick) if truth else None,
             "robots": rows,
-            "truth": _truth_row(truth),
+            "truth": self._truth_row(truth),
             "worst": worst,
         }
+
+    def _truth_row(self, truth: Truth | None) -> dict | None:
+        """:func:`_truth_row` of ``truth``, made once per truth (see :attr:`_truth_rows`)."""
+        made_for, row = self._truth_rows
+        if truth is not made_for:
+            row = _truth_row(truth)
+            self._truth_rows = (truth, row)
+        return row
 
     # ------------------------------------------------------------------ frames
     def _add(self, trace: str, tick: int, value) -> None:
@@ -611,7 +622,7 @@ class TeamState:
             "phases": _PHASES,
             "switches": {label: self.t(tick) for label, tick in self.switches.items()},
             "robots": robots,
-            "truth": _truth_row(truth),
+            "truth": self._truth_row(truth),
             "plant": None
             if plant is None
             else {

@@ -8,30 +8,28 @@ computer could reach, the yardstick for the distributed estimators under noise.
 
 Unknowns: the constants ``m``, ``J`` and each contact's arm ``r_i = p_Ci − p_C`` in the load
 frame (the load frame is ``W`` at the first tick: ``θ_0 = 0``); and the states at each tick,
-the load's angle ``θ_k``, its angular velocity ``ω_k`` and its COM's velocity ``u_k``. With
-``Q = [[0, −1], [1, 0]]``, ``R(θ)`` the rotation and ``T`` the period, the weighted residuals
-are (``f_ik`` is the force applied over ``[t_{k−1}, t_k]``, as a measurement reports it):
+the load's angle ``θ_k`` and its COM's velocity ``u_k`` (the angular velocity ``ω_k`` is the
+central difference of the angles). With ``Q = [[0, −1], [1, 0]]``, ``R(θ)`` the rotation
+and ``T`` the period, the weighted residuals are (``f_ik`` is the force applied over
+``[t_{k−1}, t_k]``, as a measurement reports it):
 
 - rigid kinematics, eq. (1): ``(u_k + ω_k Q R(θ_k) r_i − v_ik) / σ_v`` per robot and tick;
 - translation: ``(m (u_k − u_{k−1}) − T Σ_i f_ik) / (T σ_f √n)``;
 - rotation: ``(J (ω_k − ω_{k−1}) − T Σ_i (Q R(θ̄_k) r_i)ᵀ f_ik) / (T σ_f ‖r‖)``, ``θ̄_k`` the
-  interval's mid angle;
-- the angle: ``(θ_k − θ_{k−1} − T (ω_k + ω_{k−1}) / 2) / σ_θ`` (trapezoidal integration, held
-  tight).
+  interval's mid angle.
 
 Velocity noise enters the kinematic residuals, force noise the dynamic ones (``σ_v`` and
-``σ_f``, the sensors' noise, weight them), and ``ω_k`` is the central difference of the angles.
-The fit is Levenberg–Marquardt on the sparse problem, and the parameters' standard deviations
-come from the Jacobian at the solution, ``(JᵀJ)⁻¹`` for unit-variance residuals. The starting
-point comes from the relative velocities: ``∫ (v_j − v_1) dt`` runs on a circle centred at
-``−(p_Cj − p_C1)`` at the first tick (a circle fit, Kåsa's), which gives the contacts' geometry
-and ``θ_k``.
+``σ_f``, the sensors' noise, weight them). The fit is Levenberg–Marquardt on the sparse
+problem, and the parameters' standard deviations come from the Jacobian at the solution,
+``(JᵀJ)⁻¹`` for unit-variance residuals. The starting point comes from the relative
+velocities: ``∫ (v_j − v_1) dt`` runs on a circle centred at ``−(p_Cj − p_C1)`` at the first
+tick (a circle fit, Kåsa's), which gives the contacts' geometry and ``θ_k``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csc_matrix, csr_matrix, diags, lil_matrix
@@ -64,9 +62,10 @@ class BaselineFit:
     first_tick: int
     angle: float
     """θ at the last tick (rad), the load's turn since the first."""
-    converged: bool = True
-    """Whether the solver met its tolerances (False: it ran out of evaluations)."""
-    cost: float = field(default=math.nan)
+    converged: bool
+    """Whether the cost stopped decreasing (False: the solver ran out of iterations)."""
+    cost: float
+    """``½‖r‖²`` of the weighted residuals at the solution."""
 
     def relative_position(self, i: int, j: int) -> tuple[float, float]:
         """``z_ij = p_Ci − p_Cj`` at the last tick."""
@@ -99,19 +98,22 @@ def fit(
         raise ValueError(f"{ticks} ticks of {n} robots: too few to fit")
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(f))):
         raise ValueError("the measurements hold non-finite values")
-    model = _Model(v, f, period_s)
     sigma_v, sigma_f = max(velocity_noise, MIN_SIGMA_V), max(force_noise, MIN_SIGMA_F)
-    model.weights(sigma_v, sigma_f)
+    model = _Model(v, f, period_s, sigma_v, sigma_f)
     solution = _levenberg_marquardt(model.residuals, model.start(), model.sparsity())
-    return model.result(solution, first_tick, sigma_v, sigma_f)
+    return model.result(solution, first_tick)
 
 
 class _Model:
     """The residuals of the fit (see the module docstring) over the unknowns
-    ``x = [m, J, r_1..r_n (2n), θ_1..θ_K, ω_0..ω_K, u_0..u_K (2 each)]``."""
+    ``x = [m, J, r_1..r_n (2n), θ_1..θ_K, u_0..u_K (2 each)]``, weighted by the sensors'
+    noise ``sigma_v`` and ``sigma_f``."""
 
-    def __init__(self, v: np.ndarray, f: np.ndarray, period_s: float):
+    def __init__(
+        self, v: np.ndarray, f: np.ndarray, period_s: float, sigma_v: float, sigma_f: float
+    ):
         self.v, self.f, self.T = v, f, period_s
+        self.sigma_v, self.sigma_f = sigma_v, sigma_f
         self.ticks, self.n, _ = v.shape
         self.total_force = f[1:].sum(axis=1)  # (K, 2)
         n, k1 = self.n, self.ticks
@@ -119,10 +121,6 @@ class _Model:
         self.i_theta = self.i_r + 2 * n  # θ_1..θ_K (θ_0 = 0)
         self.i_u = self.i_theta + (k1 - 1)
         self.size = self.i_u + 2 * k1
-        self.sigma_v = self.sigma_f = 1.0
-
-    def weights(self, sigma_v: float, sigma_f: float) -> None:
-        self.sigma_v, self.sigma_f = sigma_v, sigma_f
 
     def unpack(self, x: np.ndarray):
         n = self.n
@@ -138,21 +136,21 @@ class _Model:
         c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
         return np.stack((c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]), axis=2)
 
+    def _torques(self, theta: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """``Σ_i (Q R(θ̄_k) r_i)ᵀ f_ik`` over each interval, at its mid angle ``θ̄_k``."""
+        arms = self._arms(0.5 * (theta[1:] + theta[:-1]), r)
+        return np.einsum("kia,kia->k", _perp(arms), self.f[1:])
+
     def residuals(self, x: np.ndarray) -> np.ndarray:
         m, j, r, theta, omega, u = self.unpack(x)
         T, n = self.T, self.n
-        arms = self._arms(theta, r)
-        perp = np.stack((-arms[..., 1], arms[..., 0]), axis=2)
+        perp = _perp(self._arms(theta, r))
         kinematic = (u[:, None, :] + omega[:, None, None] * perp - self.v) / self.sigma_v
         translation = (m * np.diff(u, axis=0) - T * self.total_force) / (
             T * self.sigma_f * math.sqrt(n)
         )
-        mid = 0.5 * (theta[1:] + theta[:-1])
-        mid_arms = self._arms(mid, r)
-        mid_perp = np.stack((-mid_arms[..., 1], mid_arms[..., 0]), axis=2)
-        torque = np.einsum("kia,kia->k", mid_perp, self.f[1:])
         scale = T * self.sigma_f * max(float(np.sqrt(np.sum(r**2))), 1e-3)
-        rotation = (j * np.diff(omega) - T * torque) / scale
+        rotation = (j * np.diff(omega) - T * self._torques(theta, r)) / scale
         return np.concatenate((kinematic.ravel(), translation.ravel(), rotation))
 
     def sparsity(self):
@@ -205,9 +203,7 @@ class _Model:
         du = np.diff(u, axis=0).ravel()
         impulse = (T * self.total_force).ravel()
         m = float(du @ impulse / max(du @ du, 1e-12))
-        arms = self._arms(0.5 * (theta[1:] + theta[:-1]), r)
-        perp = np.stack((-arms[..., 1], arms[..., 0]), axis=2)
-        torque = np.einsum("kia,kia->k", perp, self.f[1:]) * T
+        torque = T * self._torques(theta, r)
         dw = np.diff(omega)
         j = float(dw @ torque / max(dw @ dw, 1e-12))
         return np.concatenate(([max(m, 1e-3), max(j, 1e-4)], r.ravel(), theta[1:], u.ravel()))
@@ -216,7 +212,6 @@ class _Model:
         """The covariance of ``m, J, r_1..r_n`` with the states marginalised: the leading
         block of ``(JᵀJ)⁻¹`` (residuals of unit variance), from a sparse factorisation."""
         count = self.i_theta
-        jac = csr_matrix(jac)
         try:
             factor = splu((jac.T @ jac).tocsc())
             unit = np.zeros((self.size, count))
@@ -225,16 +220,15 @@ class _Model:
         except (RuntimeError, ValueError):  # singular: the data do not determine the load
             return np.full((count, count), np.nan)
 
-    def result(self, solution, first_tick: int, sigma_v: float, sigma_f: float) -> BaselineFit:
-        x = solution.x
-        m, j, r, theta, omega, u = self.unpack(x)
+    def result(self, solution, first_tick: int) -> BaselineFit:
+        m, j, r, theta, _, _ = self.unpack(solution.x)
         covariance = self._parameter_covariance(solution.jac)
         last = self._arms(theta[-1:], r)[0]
         c, s = math.cos(theta[-1]), math.sin(theta[-1])
+        rot = np.array([[c, -s], [s, c]])
         stds = []
         for i in range(self.n):
             block = covariance[2 + 2 * i : 4 + 2 * i, 2 + 2 * i : 4 + 2 * i]
-            rot = np.array([[c, -s], [s, c]])
             world = rot @ block @ rot.T
             stds.append(float(np.sqrt(max(world[0, 0], world[1, 1], 0.0))))
         return BaselineFit(
@@ -244,8 +238,8 @@ class _Model:
             mass_std=float(np.sqrt(covariance[0, 0])) if covariance[0, 0] >= 0 else math.nan,
             moment_std=float(np.sqrt(covariance[1, 1])) if covariance[1, 1] >= 0 else math.nan,
             contact_to_com_std=tuple(stds),
-            velocity_noise=sigma_v,
-            force_noise=sigma_f,
+            velocity_noise=self.sigma_v,
+            force_noise=self.sigma_f,
             ticks=self.ticks,
             first_tick=first_tick,
             angle=float(theta[-1]),
@@ -273,9 +267,9 @@ def _levenberg_marquardt(residuals, x0: np.ndarray, pattern, iterations: int = 2
     r = residuals(x)
     cost = 0.5 * float(r @ r)
     lam, status = 1e-3, 0
-    jac = None
+    jac, jac_at = None, None  # the Jacobian and the point it was taken at
     for _ in range(iterations):
-        jac = _jacobian(residuals, x, r, groups, rows, cols, pattern.shape)
+        jac, jac_at = _jacobian(residuals, x, r, groups, rows, cols, pattern.shape), x
         normal = (jac.T @ jac).tocsc()
         gradient = jac.T @ r
         scale = normal.diagonal() + 1e-12
@@ -299,7 +293,8 @@ def _levenberg_marquardt(residuals, x0: np.ndarray, pattern, iterations: int = 2
         if not improved or decrease < 1e-12:
             status = 1
             break
-    jac = _jacobian(residuals, x, r, groups, rows, cols, pattern.shape)
+    if jac_at is not x:  # the last step moved x: the covariance needs J there
+        jac = _jacobian(residuals, x, r, groups, rows, cols, pattern.shape)
     return _Solution(x, jac, cost, status)
 
 
@@ -334,6 +329,11 @@ def _jacobian(residuals, x, r, groups, rows, cols, shape) -> csr_matrix:
         derivative[g] = residuals(shifted) - r
     values = derivative[column_of_group[cols], rows] / steps[cols]
     return csr_matrix((values, (rows, cols)), shape=shape)
+
+
+def _perp(vectors: np.ndarray) -> np.ndarray:
+    """``Q v`` for every vector of ``vectors`` (``(..., 2)``): ``(−v_y, v_x)``."""
+    return np.stack((-vectors[..., 1], vectors[..., 0]), axis=-1)
 
 
 def _circle_centre(points: np.ndarray) -> np.ndarray:

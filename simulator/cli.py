@@ -18,6 +18,7 @@ import what they run.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import signal
@@ -998,8 +999,6 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     lines.append("(ctc = contact_to_com = p_C - p_Ci in the world frame at the last tick fitted)")
     print("\n".join(lines))
     if args.out:
-        import dataclasses
-
         true = None
         if truth is not None:
             true = {"tick": truth.tick, "mass": truth.mass, "moment": truth.moment}

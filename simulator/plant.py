@@ -96,7 +96,7 @@ class Plant:
         self._ideal = actuators.ideal
         drives = np.random.default_rng((scenario.run.seed, ACTUATOR_STREAM))
         if actuators.gains:
-            gains = tuple(float(g) for g in actuators.gains)
+            gains = actuators.gains
         elif actuators.gain_error_std > 0.0:
             errors = drives.normal(0.0, actuators.gain_error_std, size=self._n)
             gains = tuple(np.clip(1.0 + errors, 0.5, 1.5))
