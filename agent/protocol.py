@@ -19,9 +19,8 @@ sample ``k`` is taken at the same instant ``t_k`` (the robots' clocks are synchr
 message stamped ``k`` was produced after sample ``k`` and before sample ``k + 1``.
 
 This module imports nothing of the project but the typed-table reader :mod:`agent.config` and
-``Vec2``, and
-no third-party package: a bridge or a display reads the team's messages without the plant, the
-estimator or a plotting library.
+``Vec2``, and of third-party packages only ``orjson``: a bridge or a display reads the team's
+messages without the plant, the estimator or a plotting library.
 """
 
 from __future__ import annotations
@@ -403,12 +402,13 @@ class Keys:
 
 # ====================================================================== on the wire
 # Payloads start with a 3-byte header: magic ``b"H"``, :data:`WIRE_VERSION`, and a kind byte.
-# The per-tick messages (measurement, command, share, clock) are packed with :mod:`struct`
-# (little-endian, fixed size); the occasional ones are UTF-8 JSON objects with every field of
-# the dataclass (pairs as arrays, phases by name). :func:`decode` checks everything it can and
-# raises :class:`DecodeError` — callers count and log those, never crash on them.
+# The per-tick messages (measurement, command, share, clock, estimates) are packed with
+# :mod:`struct` (little-endian: a fixed part, then counted repeats); the occasional ones are
+# UTF-8 JSON objects with every field of the dataclass (pairs as arrays, phases by name).
+# :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
+# log those, never crash on them.
 
-WIRE_VERSION = 2
+WIRE_VERSION = 3
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -422,6 +422,24 @@ _COMMAND = _struct.Struct("<Hq2d")
 _SHARE = _struct.Struct("<Hq2dHB2ddBQqqB")
 _FLOW = _struct.Struct("<H3d")
 _CLOCK = _struct.Struct("<qd")
+_ESTIMATES = _struct.Struct("<HqBqHBBB")
+"""robot, tick, phase, phase_since, which optional values follow (bit per
+:data:`_OPTIONAL_ESTIMATES` entry), then how many relative positions, started and settled
+steps follow them."""
+_NEIGHBOUR = _struct.Struct("<H2d")
+_STEP = _struct.Struct("<Bq")
+_OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
+    ("omega", 1),
+    ("centroid_offset", 2),
+    ("spread", 1),
+    ("moment", 1),
+    ("com_offset", 2),
+    ("com_observer", 2),
+    ("com_velocity", 2),
+    ("mass", 1),
+    ("contact_to_com", 2),
+)
+"""The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
     Measurement: 1,
     Command: 2,
@@ -435,11 +453,11 @@ KINDS: dict[type, int] = {
     BridgeStatus: 10,
 }
 """Every message class and its kind byte."""
-_STRUCT_KINDS = (Measurement, Command, Share, Clock)
+_STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
 
 
 def _finite(*values: float) -> bool:
-    return all(_math.isfinite(v) for v in values)
+    return all(map(_math.isfinite, values))
 
 
 def _json_value(value):
@@ -484,8 +502,98 @@ def encode(message: object) -> bytes:
         return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
     if kind == 4:
         return head + _CLOCK.pack(m.tick, m.time_s)
+    if kind == 5:
+        return head + _encode_estimates(m)
     body = {f.name: _json_value(getattr(m, f.name)) for f in _dataclasses.fields(m)}
     return head + _json.dumps(body, allow_nan=False, separators=(",", ":")).encode()
+
+
+def _encode_estimates(m: Estimates) -> bytes:
+    present, values = 0, []
+    for bit, (name, width) in enumerate(_OPTIONAL_ESTIMATES):
+        value = getattr(m, name)
+        if value is not None:
+            present |= 1 << bit
+            values.extend((value,) if width == 1 else value)
+    fixed = _ESTIMATES.pack(
+        m.robot,
+        m.tick,
+        m.phase,
+        m.phase_since,
+        present,
+        len(m.relative_positions),
+        len(m.started),
+        len(m.settled),
+    )
+    return b"".join(
+        (
+            fixed,
+            _struct.pack(f"<{len(values)}d", *values),
+            *(_NEIGHBOUR.pack(j, *z) for j, z in m.relative_positions.items()),
+            *(_STEP.pack(step, tick) for step, tick in m.started.items()),
+            *(_STEP.pack(step, tick) for step, tick in m.settled.items()),
+        )
+    )
+
+
+@_functools.cache
+def _optional_layout(present: int) -> tuple[_struct.Struct, tuple[tuple[str, int], ...]]:
+    """The numbers that follow an :class:`Estimates`' fixed part whose presence bits are
+    ``present``, and the fields they fill."""
+    fields = tuple(f for bit, f in enumerate(_OPTIONAL_ESTIMATES) if present >> bit & 1)
+    return _struct.Struct(f"<{sum(width for _, width in fields)}d"), fields
+
+
+@_functools.cache
+def _repeats(layout: _struct.Struct, count: int) -> _struct.Struct:
+    """``count`` of ``layout`` back to back, as one flat tuple."""
+    return _struct.Struct("<" + layout.format[1:] * count)
+
+
+def _decode_estimates(body: memoryview) -> Estimates:
+    if len(body) < _ESTIMATES.size:
+        raise DecodeError(f"estimates: {len(body)} bytes, expected at least {_ESTIMATES.size}")
+    robot, tick, phase, since, present, neighbours, started, settled = _ESTIMATES.unpack_from(body)
+    if present >> len(_OPTIONAL_ESTIMATES):
+        raise DecodeError(f"estimates: presence bits 0x{present:04x} name no field")
+    numbers, fields = _optional_layout(present)
+    expected = (
+        _ESTIMATES.size
+        + numbers.size
+        + neighbours * _NEIGHBOUR.size
+        + (started + settled) * _STEP.size
+    )
+    if len(body) != expected:
+        raise DecodeError(f"estimates: {len(body)} bytes, expected {expected}")
+    at = _ESTIMATES.size
+    values = numbers.unpack_from(body, at)
+    if not _finite(*values):
+        raise DecodeError("estimates: non-finite number")
+    optional, i = {}, 0
+    for name, width in fields:
+        optional[name] = values[i] if width == 1 else (values[i], values[i + 1])
+        i += width
+    at += numbers.size
+    flat = _repeats(_NEIGHBOUR, neighbours).unpack_from(body, at)
+    if not _finite(*flat[1::3], *flat[2::3]):
+        raise DecodeError("estimates: non-finite relative position")
+    relative = dict(zip(flat[0::3], zip(flat[1::3], flat[2::3], strict=True), strict=True))
+    at += neighbours * _NEIGHBOUR.size
+    flat = _repeats(_STEP, started + settled).unpack_from(body, at)
+    steps = dict(zip(flat[0 : 2 * started : 2], flat[1 : 2 * started : 2], strict=True))
+    done = dict(zip(flat[2 * started :: 2], flat[2 * started + 1 :: 2], strict=True))
+    if (len(relative), len(steps), len(done)) != (neighbours, started, settled):
+        raise DecodeError("estimates: a neighbour or a step repeated")
+    return Estimates(
+        robot,
+        tick,
+        _phase(phase, "estimates"),
+        since,
+        relative_positions=relative,
+        started=steps,
+        settled=done,
+        **optional,
+    )
 
 
 def _check_header(payload: bytes, expected: int) -> memoryview:
@@ -735,4 +843,6 @@ def _decode(kind: type, payload: bytes):
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))
+    if kind is Estimates:
+        return _decode_estimates(body)
     return _json_message(kind, body)
