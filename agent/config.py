@@ -476,6 +476,8 @@ def toml_value(value: Any) -> str:
     """One TOML value: booleans, integers, floats (``repr``, exact), strings, arrays."""
     if isinstance(value, bool):
         return "true" if value else "false"
+    if isinstance(value, enum.Enum):
+        return _toml_string(value.name.lower())
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
@@ -512,6 +514,16 @@ def to_toml(obj: Any, comment: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
+class Estimators(enum.Enum):
+    """Which estimators an agent runs (``[agent] estimator``)."""
+
+    PAPER = "paper"
+    """The paper's (eqs. 10-25, settling judged by drift): exact without noise."""
+    ROBUST = "robust"
+    """For noisy sensors: Step 1 by the arc fit (:mod:`agent.estimation.arc_fit`), settling
+    judged by each estimate's own uncertainty."""
+
+
 @dataclass(frozen=True)
 class AgentTuning:
     """The gains and limits an agent runs with; the same for every robot of a team.
@@ -524,6 +536,8 @@ class AgentTuning:
     known (the scenario's ``sensors.rate_hz``, robot.toml's ``period_s``).
     """
 
+    estimator: Estimators = Estimators.PAPER
+    """``paper`` or ``robust`` (:class:`Estimators`)."""
     max_force: float = bounded(10.0, 0, 1000, "N", open_low=True)
     """N: bound on every commanded force's magnitude (safety)."""
     filter_gain: float = bounded(5.0, 0, 1000, "1/s", open_low=True)
@@ -546,11 +560,19 @@ class AgentTuning:
     """s: shortest Step 4 (it also spins the load up for Step 5)."""
     inertia_max_omega: float = bounded(1.0, 0, 10, "rad/s", open_low=True)
     """rad/s: Step 4 brakes when |ω| reaches this and speeds up again below half of it."""
+    inertia_flip_s: float = bounded(1.0, 0, 60, "s", min_ticks=1)
+    """s: with ``estimator = "robust"``, Step 4 speeds up for this long, then brakes for as
+    long, in turn (at most ``inertia_flip_s`` × the load's angular acceleration above the
+    turn it had: keep it below ``inertia_max_omega``)."""
     push_fbar: float = bounded(1.0, 0, 1000, "rad/s² per m", open_low=True)
     """f̄_y (rad/s² per m) of Steps 5–7: each robot pushes with ``f = f̄_y Ĵ / n`` (Sec. VI) ..."""
     push_min_force: float = bounded(1.0, 0, 1000, "N", open_low=True)
     """N: ... but at least this much (a compact load's COM would barely accelerate for Step 7),
     and at most ``max_force``."""
+    push_force: float = bounded(3.0, 0, 1000, "N", open_low=True)
+    """N: with ``estimator = "robust"``, every robot pushes with exactly this (at most
+    ``max_force``): the robots' Ĵ differ by their noise, and eq. (17)'s ``f̄_y Ĵ/n`` would
+    make their forces differ too, where Steps 5 and 7 need one common force."""
     push_direction: tuple[float, float] = (0.0, 1.0)
     """Direction in ``W`` of the common force ``f`` of Steps 5–7: a vector of length in
     [0.001, 1000] (only its direction counts)."""
@@ -560,6 +582,10 @@ class AgentTuning:
     """s: an estimate has settled when it moved less than the tolerance over this window."""
     settle_tolerance: float = bounded(1e-4, 1e-8, 0.1)
     """Relative change that counts as settled."""
+    settle_uncertainty: float = bounded(0.01, 1e-6, 0.5)
+    """With ``estimator = "robust"``: the relative standard deviation below which an estimate
+    may count as settled (and changes within three of its standard deviations count as
+    still)."""
     switch_margin_ticks: int = bounded(10, 0, 1000, "ticks")
     """Ticks added to ``n`` between the team agreeing on a phase switch and making it."""
 
@@ -571,7 +597,7 @@ class AgentTuning:
         (:func:`bounded`), the forces are at most ``max_force`` and ``push_direction``'s length
         is in [0.001, 1000]."""
         check_bounds(self, where)
-        for key in ("kick_force", "inertia_force", "push_min_force"):
+        for key in ("kick_force", "inertia_force", "push_min_force", "push_force"):
             if getattr(self, key) > self.max_force:
                 raise ConfigError(
                     f"{where}.{key}: expected at most max_force ({self.max_force!r} N),"

@@ -25,10 +25,13 @@ The force laws:
 - *inertia*: ``f_i = ±k z_i⊥`` with ``k = F/√w`` (eq. 14, :mod:`agent.estimation.inertia`): the
   torque ``±k w`` speeds the turn the load already has up until ``|ω|`` reaches
   ``inertia_max_omega``, then brakes it down to half of that, and so on. ``ω`` at the tick is
-  predicted from its last measurement, the torque applied since and ``Ĵ``: every robot
-  predicts the same value, so they all reverse at the same tick;
+  predicted from its last measurement, the torque applied since and ``Ĵ``: without noise every
+  robot predicts the same value, so they all reverse at the same tick. With ``estimator =
+  "robust"`` the robots' ω differ by their noise, so the torque instead speeds up for
+  ``inertia_flip_s`` and brakes for as long, in turn, from the agreed tick on;
 - *push*: the common force ``f = max(f̄_y Ĵ/n, push_min_force)`` along ``push_direction``, at
-  most ``max_force`` (eq. 17 and Sec. VI, ``f_y = J/n`` for ``f̄_y = 1``).
+  most ``max_force`` (eq. 17 and Sec. VI, ``f_y = J/n`` for ``f̄_y = 1``); with ``estimator =
+  "robust"`` the configured ``push_force``, the same for every robot whatever its Ĵ.
 
 Every command is bounded by ``max_force`` (:func:`agent.safety.saturate`).
 """
@@ -39,7 +42,7 @@ import math
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Protocol
 
-from agent.config import AgentConfig
+from agent.config import AgentConfig, Estimators
 from agent.coordination import PhaseBarrier
 from agent.estimation.excitation import kick_force, spin_up_force
 from agent.estimation.geometry import Vec2, rotate
@@ -95,6 +98,8 @@ class PhaseMachine:
         self.kick_ticks = round(tuning.kick_duration_s / self.dt)
         self.kick = kick_force(config.seed, config.robot, tuning.kick_force)
         self.inertia_min_ticks = round(tuning.inertia_min_s / self.dt)
+        self.robust = tuning.estimator == Estimators.ROBUST
+        self.flip_ticks = round(tuning.inertia_flip_s / self.dt)
         self.spin_sign = 0.0
         """``sign(ω)`` when the inertia phase began: the torque first speeds that turn up."""
         self.inertia_gain = 0.0
@@ -157,7 +162,10 @@ class PhaseMachine:
         elif phase == Phase.PUSH:
             self.moment_used = own.moment
             t = self.tuning
-            magnitude = max(t.push_fbar * self.moment_used / self.n, t.push_min_force)
+            if self.robust:
+                magnitude = t.push_force
+            else:
+                magnitude = max(t.push_fbar * self.moment_used / self.n, t.push_min_force)
             self.push = _unit(t.push_direction, min(magnitude, t.max_force))
         self._begin(phase)
         return True
@@ -214,13 +222,19 @@ class PhaseMachine:
 
     def _inertia_force(self, k: int, own: OwnEstimates) -> Vec2:
         """Eq. (14) with the torque's sign for tick ``k`` (records the team's torque)."""
-        # Speed the turn up until |ω| reaches the limit, then brake down to half of it.
-        speed = abs(self.omega_at(k, own))
-        limit = self.tuning.inertia_max_omega
-        if speed >= limit:
-            self.direction = -1.0
-        elif speed <= 0.5 * limit:
-            self.direction = 1.0
+        if self.robust:
+            # Speed up, then brake as long, from the agreed tick on: every robot takes the
+            # same decisions whatever the noise on its ω.
+            flips = (k - self.since) // max(1, self.flip_ticks)
+            self.direction = 1.0 if flips % 2 == 0 else -1.0
+        else:
+            # Speed the turn up until |ω| reaches the limit, then brake down to half of it.
+            speed = abs(self.omega_at(k, own))
+            limit = self.tuning.inertia_max_omega
+            if speed >= limit:
+                self.direction = -1.0
+            elif speed <= 0.5 * limit:
+                self.direction = 1.0
         self._torque[k] = self.direction * self.inertia_torque
         # z_i turned to the middle of [t_k, t_k+1): the torque then averages ±k w.
         lead = (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt

@@ -28,15 +28,19 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from agent.config import AgentConfig
+from agent.config import AgentConfig, Estimators
 from agent.estimation.angular_velocity import angular_velocity
+from agent.estimation.arc_fit import ArcRelativePosition
 from agent.estimation.centroid import CentroidConsensus
+from agent.estimation.com_fit import ComFit
 from agent.estimation.com_observer import ComObserver
 from agent.estimation.com_regression import ComRegression
 from agent.estimation.com_velocity import com_velocity
 from agent.estimation.geometry import Vec2, rotate
 from agent.estimation.inertia import InertiaEstimator
+from agent.estimation.inertia_fit import InertiaFit
 from agent.estimation.mass import MassEstimator
+from agent.estimation.mass_fit import MassFit
 from agent.estimation.relative_position import RelativePosition
 from agent.estimation.settling import SettleDetectors
 from agent.protocol import Estimates, Phase
@@ -56,13 +60,19 @@ class EstimationPipeline:
         self.neighbours = neighbours
         self.dt = config.period_s
         window = max(1, round(tuning.settle_window_s / self.dt))
-        self.settle = SettleDetectors.of(window, tuning.settle_tolerance)
+        self.robust = tuning.estimator == Estimators.ROBUST
+        self.settle = SettleDetectors.of(
+            window, tuning.settle_tolerance, tuning.settle_uncertainty if self.robust else 0.0
+        )
         self.started: dict[int, int] = {1: 0}
         """Paper step → the instant (or tick, for a phase's steps) it began."""
         memory = tuning.regression_memory_s
         self.forgetting = math.exp(-self.dt / memory) if memory > 0 else 1.0
-        self.edges = {
-            j: RelativePosition(tuning.filter_gain, self.forgetting) for j in self.neighbours
+        self.edges: dict[int, RelativePosition | ArcRelativePosition] = {
+            j: ArcRelativePosition(self.forgetting)
+            if self.robust
+            else RelativePosition(tuning.filter_gain, self.forgetting)
+            for j in self.neighbours
         }
         self._edge_instant: dict[int, int] = {}
         """The last instant each edge was sampled at."""
@@ -81,12 +91,12 @@ class EstimationPipeline:
         self.zdot: dict[int, Vec2] = {}
         """``ż_ij`` at the estimation instant, by neighbour."""
         self.consensus = CentroidConsensus(config.robot, self.neighbours)
-        self.inertia: InertiaEstimator | None = None
-        self.com: ComRegression | None = None
+        self.inertia: InertiaEstimator | InertiaFit | None = None
+        self.com: ComRegression | ComFit | None = None
         self.push_angle = 0.0
         """The load's rotation angle at the push phase's first instant (Step 5's reference)."""
         self.observer: ComObserver | None = None
-        self.mass_estimator: MassEstimator | None = None
+        self.mass_estimator: MassEstimator | MassFit | None = None
         self.com_velocity: Vec2 | None = None
 
     # ---------------------------------------------------------------- what the phases read
@@ -161,7 +171,13 @@ class EstimationPipeline:
         distances = [self.edges[j].distance for j in self.neighbours]
         if None in distances:
             return
-        self.settle.distances.update(distances, e)
+        # The robust estimates' own uncertainty: the least certain distance's for the
+        # distances, the least certain z_ij's for z_i and w / n (the consensus of the z_ij).
+        std = radius_std = None
+        if self.robust:
+            radius_std = max(self.edges[j].distance_std for j in self.neighbours)
+            std = max(self.edges[j].std for j in self.neighbours)
+        self.settle.distances.update(distances, e, radius_std)
         # z_i in the frame of the longest edge (always the same one): constant once converged.
         longest = max(self.neighbours, key=lambda j: self.edges[j].distance)
         z = self.relative_position(longest)
@@ -170,8 +186,9 @@ class EstimationPipeline:
         d = math.hypot(*z)
         u = (z[0] / d, z[1] / d)
         x = self.consensus.centroid
-        self.settle.centroid.update((x[0] * u[0] + x[1] * u[1], u[0] * x[1] - u[1] * x[0]), e)
-        self.settle.spread.update((self.consensus.spread,), e)
+        self.settle.centroid.update((x[0] * u[0] + x[1] * u[1], u[0] * x[1] - u[1] * x[0]), e, std)
+        spread_std = None if std is None else 2.0 * math.hypot(*x) * std
+        self.settle.spread.update((self.consensus.spread,), e, spread_std)
 
     def _moment_of_inertia(
         self, e: int, prev: int | None, span: float, phases: PhaseMachine
@@ -182,14 +199,16 @@ class EstimationPipeline:
         k_inertia = phases.entered.get(Phase.INERTIA)
         if k_inertia is None or e < k_inertia:
             return
-        omega = self.omega
-        if not self.inertia.regression.started:
-            self.inertia.update(omega, 0.0, span)  # starts the filters
+        # The paper's estimator reads ω (eq. 15), the robust one the rotation angle.
+        observed = self.angle if self.robust else self.omega
+        if not self.inertia.started:
+            self.inertia.update(observed, 0.0, span)  # starts the filters
         elif prev >= k_inertia and phases.phase_at(e - 1) == Phase.INERTIA:
-            self.inertia.update(omega, phases.mean_torque(prev, e), span)
+            self.inertia.update(observed, phases.mean_torque(prev, e), span)
             moment = self.inertia.estimate
             if moment is not None:
-                self.settle.moment.update((moment,), e)
+                std = self.inertia.std if self.robust else None
+                self.settle.moment.update((moment,), e, std)
 
     def _centre_of_mass_and_mass(
         self, e: int, prev: int | None, span: float, phases: PhaseMachine, inbox: Inbox
@@ -203,24 +222,27 @@ class EstimationPipeline:
         omega = self.omega
         # The regressions hold only while the common force acts, over the whole interval.
         pushing = prev is not None and prev >= k_push and phases.phase_at(e - 1) == Phase.PUSH
-        if not self.com.regression.started:
+        # The paper's estimators read ω (eq. 18), the robust ones the rotation angle.
+        if not self.com.started:
             self.push_angle = self.angle
             self.observer = ComObserver(
                 self.n, phases.moment_used, phases.push, self.tuning.observer_gain, omega
             )
-            self.com.update(omega, 0.0, span)  # starts the filters
+            self._update_com(omega, 0.0, span)  # starts the filters
             return
         alpha = self.angle - self.push_angle
         if pushing:
             self.observer.update(omega, span)
-            self.com.update(omega, alpha, span)
+            self._update_com(omega, alpha, span)
         ref_offset = self.com.estimate
         if ref_offset is None:
             return
         if pushing:
-            self.settle.com_offset.update(ref_offset, e)
-        if not self.settle.com_offset.settled and self.mass_estimator is None:
-            return
+            std = self.com.std if self.robust else None
+            # An offset is judged against the load's size, √(w/n), not its own.
+            self.settle.com_offset.update(ref_offset, e, std, math.sqrt(self.spread))
+        if not (self.settle.com_offset.settled or self.robust) and self.mass_estimator is None:
+            return  # (the robust mass fit starts with the push: see MassFit)
         z_c = self.com.com_offset(alpha)
         x = self.consensus.centroid
         offset = (x[0] + z_c[0], x[1] + z_c[1])
@@ -231,29 +253,63 @@ class EstimationPipeline:
         if not pushing:
             return
         if self.mass_estimator is None:
-            self.mass_estimator = MassEstimator(
-                self.tuning.filter_gain, self.n, phases.push, self.forgetting
+            self.mass_estimator = (
+                MassFit(self.n, phases.push, self.forgetting)
+                if self.robust
+                else MassEstimator(self.tuning.filter_gain, self.n, phases.push, self.forgetting)
             )
             self.started[6] = e
             self.started[7] = e
-        self.mass_estimator.update(self.com_velocity, span)
+        if self.robust:
+            self.mass_estimator.update(v_i, offset, self.angle, span)
+        else:
+            self.mass_estimator.update(self.com_velocity, span)
         mass = self.mass_estimator.estimate
         if mass is not None:
-            self.settle.mass.update((mass,), e)
+            std = self.mass_estimator.std if self.robust else None
+            self.settle.mass.update((mass,), e, std)
+
+    def _update_com(self, omega: float, alpha: float, span: float) -> None:
+        if self.robust:
+            self.com.update(alpha, span)
+        else:
+            self.com.update(omega, alpha, span)
 
     # ---------------------------------------------------------------- phases
     def enter(self, phase: Phase, k: int, phases: PhaseMachine) -> None:
         """The team begins ``phase`` at tick ``k``: start the steps that run in it."""
         if phase == Phase.INERTIA:
             self.started[4] = k
-            self.inertia = InertiaEstimator(self.tuning.filter_gain, self.forgetting)
+            self.inertia = (
+                InertiaFit(self.forgetting, self._torque_scale_std())
+                if self.robust
+                else InertiaEstimator(self.tuning.filter_gain, self.forgetting)
+            )
             for edge in self.edges.values():
                 edge.learning = False  # Step 1 is done: keep the distances, track directions.
         elif phase == Phase.PUSH:
             self.started[5] = k
-            self.com = ComRegression(
-                self.tuning.filter_gain, self.n, phases.moment_used, phases.push, self.forgetting
+            self.com = (
+                ComFit(self.n, phases.moment_used, phases.push, self.forgetting)
+                if self.robust
+                else ComRegression(
+                    self.tuning.filter_gain,
+                    self.n,
+                    phases.moment_used,
+                    phases.push,
+                    self.forgetting,
+                )
             )
+
+    def _torque_scale_std(self) -> float:
+        """The relative standard deviation of ``w = Σ‖z_i‖²``, which scales the torque Step 4
+        assumes (``±k w``) and so ``Ĵ``: ``2 σ_z / ‖z_i‖`` per robot, ``σ_z`` the mean of
+        this robot's edges' (the others' taken alike), averaged over ``n`` robots."""
+        stds = [edge.std for edge in self.edges.values() if edge.std is not None]
+        size = math.sqrt(self.spread) if self.spread > 0.0 else 0.0
+        if not stds or size == 0.0:
+            return 0.0
+        return 2.0 * (sum(stds) / len(stds)) / size / math.sqrt(self.n)
 
     # ---------------------------------------------------------------- the load's frame
     def relative_position(self, j: int) -> Vec2 | None:
@@ -296,6 +352,7 @@ class EstimationPipeline:
         contact_to_com = None
         if z_i is not None and z_c is not None:
             contact_to_com = (-(z_i[0] + z_c[0]), -(z_i[1] + z_c[1]))
+        uncertainty = self._uncertainty(relative, contact_to_com) if self.robust else {}
         return Estimates(
             robot=robot,
             tick=self.instant,
@@ -313,4 +370,55 @@ class EstimationPipeline:
             contact_to_com=contact_to_com,
             started=dict(self.started),
             settled=self.settle.first_settled(),
+            **uncertainty,
         )
+
+    def _uncertainty(self, relative: dict[int, Vec2], contact_to_com: Vec2 | None) -> dict:
+        """The robust estimators' standard deviations and covariances, for :class:`Estimates`.
+
+        ``Cov(p_C − p_Ci) = Cov(z_i) + Cov(z_C)``, taking the two as independent: ``Cov(z_i)``
+        as the mean of the robot's own edges' (the consensus averages edges like them), and
+        ``Cov(z_C)`` as the push fit's turned with the load, plus ``c cᵀ (σ_J/J)²`` for the
+        ``Ĵ`` it was computed with (``c ∝ J``)."""
+        edges = {}
+        for j in relative:
+            cov = self.edges[j].covariance
+            if cov is not None:
+                turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
+                edges[j] = _packed(_turned(cov, turned))
+        out: dict = {"relative_positions_cov": edges}
+        if self.inertia is not None and self.inertia.std is not None:
+            out["moment_std"] = self.inertia.std
+        if self.mass_estimator is not None and self.mass_estimator.std is not None:
+            out["mass_std"] = self.mass_estimator.std
+        com_cov = self.com.covariance if self.com is not None else None
+        if contact_to_com is not None and edges and com_cov is not None:
+            alpha = self.angle - self.push_angle
+            (a, b), (_, d) = _turned(com_cov, alpha)
+            c = self.com.com_offset(alpha)
+            moment, moment_std = self.moment, self.inertia.std if self.inertia else None
+            rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
+            k = len(edges)
+            xx = sum(e[0] for e in edges.values()) / k + a + rel2 * c[0] * c[0]
+            xy = sum(e[1] for e in edges.values()) / k + b + rel2 * c[0] * c[1]
+            yy = sum(e[2] for e in edges.values()) / k + d + rel2 * c[1] * c[1]
+            out["contact_to_com_cov"] = (xx, xy, yy)
+        return out
+
+
+def _turned(cov, angle: float):
+    """``R C Rᵀ`` for a 2×2 covariance ``C`` (nested pairs) and ``R`` the rotation by
+    ``angle``."""
+    (a, b), (_, d) = cov
+    if angle == 0.0:
+        return ((a, b), (b, d))
+    c, s = math.cos(angle), math.sin(angle)
+    xx = c * c * a - 2 * c * s * b + s * s * d
+    xy = c * s * (a - d) + (c * c - s * s) * b
+    yy = s * s * a + 2 * c * s * b + c * c * d
+    return ((xx, xy), (xy, yy))
+
+
+def _packed(cov) -> tuple[float, float, float]:
+    (a, b), (_, d) = cov
+    return (a, b, d)

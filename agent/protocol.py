@@ -38,6 +38,9 @@ import orjson as _orjson
 from agent.config import ConfigError, from_table
 from agent.estimation.geometry import Vec2
 
+Cov2 = tuple[float, float, float]
+"""A 2×2 covariance ``(xx, xy, yy)``."""
+
 
 class Phase(IntEnum):
     """The team's force regime (see :mod:`agent.phase_machine`); later phases compare greater.
@@ -128,6 +131,10 @@ class Estimates:
     ``phase_since`` is the tick at which the robot entered ``phase`` (the team's agreed switch
     tick, unless the robot caught up late). ``started`` maps a paper step (1..7) to the tick at
     which the robot began it, ``settled`` to the tick at which its estimate first settled.
+
+    Uncertainty (the robust estimators give it; ``None`` or empty otherwise): ``mass_std`` and
+    ``moment_std`` are standard deviations (kg, kg m²); ``contact_to_com_cov`` and each
+    ``relative_positions_cov[j]`` are covariances ``(xx, xy, yy)`` (m²) of those vectors.
     """
 
     robot: int
@@ -146,6 +153,10 @@ class Estimates:
     contact_to_com: Vec2 | None = None
     started: dict[int, int] = field(default_factory=dict)
     settled: dict[int, int] = field(default_factory=dict)
+    mass_std: float | None = None
+    moment_std: float | None = None
+    contact_to_com_cov: Cov2 | None = None
+    relative_positions_cov: dict[int, Cov2] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True)
@@ -422,11 +433,12 @@ _COMMAND = _struct.Struct("<Hq2d")
 _SHARE = _struct.Struct("<Hq2dHB2ddBQqqB")
 _FLOW = _struct.Struct("<H3d")
 _CLOCK = _struct.Struct("<qd")
-_ESTIMATES = _struct.Struct("<HqBqHBBB")
+_ESTIMATES = _struct.Struct("<HqBqHBBBB")
 """robot, tick, phase, phase_since, which optional values follow (bit per
-:data:`_OPTIONAL_ESTIMATES` entry), then how many relative positions, started and settled
-steps follow them."""
+:data:`_OPTIONAL_ESTIMATES` entry), then how many relative positions, their covariances,
+started and settled steps follow them."""
 _NEIGHBOUR = _struct.Struct("<H2d")
+_NEIGHBOUR_COV = _struct.Struct("<H3d")
 _STEP = _struct.Struct("<Bq")
 _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("omega", 1),
@@ -438,6 +450,9 @@ _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("com_velocity", 2),
     ("mass", 1),
     ("contact_to_com", 2),
+    ("mass_std", 1),
+    ("moment_std", 1),
+    ("contact_to_com_cov", 3),
 )
 """The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
@@ -522,6 +537,7 @@ def _encode_estimates(m: Estimates) -> bytes:
         m.phase_since,
         present,
         len(m.relative_positions),
+        len(m.relative_positions_cov),
         len(m.started),
         len(m.settled),
     )
@@ -530,6 +546,7 @@ def _encode_estimates(m: Estimates) -> bytes:
             fixed,
             _struct.pack(f"<{len(values)}d", *values),
             *(_NEIGHBOUR.pack(j, *z) for j, z in m.relative_positions.items()),
+            *(_NEIGHBOUR_COV.pack(j, *c) for j, c in m.relative_positions_cov.items()),
             *(_STEP.pack(step, tick) for step, tick in m.started.items()),
             *(_STEP.pack(step, tick) for step, tick in m.settled.items()),
         )
@@ -553,7 +570,9 @@ def _repeats(layout: _struct.Struct, count: int) -> _struct.Struct:
 def _decode_estimates(body: memoryview) -> Estimates:
     if len(body) < _ESTIMATES.size:
         raise DecodeError(f"estimates: {len(body)} bytes, expected at least {_ESTIMATES.size}")
-    robot, tick, phase, since, present, neighbours, started, settled = _ESTIMATES.unpack_from(body)
+    robot, tick, phase, since, present, neighbours, covs, started, settled = _ESTIMATES.unpack_from(
+        body
+    )
     if present >> len(_OPTIONAL_ESTIMATES):
         raise DecodeError(f"estimates: presence bits 0x{present:04x} name no field")
     numbers, fields = _optional_layout(present)
@@ -561,6 +580,7 @@ def _decode_estimates(body: memoryview) -> Estimates:
         _ESTIMATES.size
         + numbers.size
         + neighbours * _NEIGHBOUR.size
+        + covs * _NEIGHBOUR_COV.size
         + (started + settled) * _STEP.size
     )
     if len(body) != expected:
@@ -571,7 +591,7 @@ def _decode_estimates(body: memoryview) -> Estimates:
         raise DecodeError("estimates: non-finite number")
     optional, i = {}, 0
     for name, width in fields:
-        optional[name] = values[i] if width == 1 else (values[i], values[i + 1])
+        optional[name] = values[i] if width == 1 else values[i : i + width]
         i += width
     at += numbers.size
     flat = _repeats(_NEIGHBOUR, neighbours).unpack_from(body, at)
@@ -579,10 +599,20 @@ def _decode_estimates(body: memoryview) -> Estimates:
         raise DecodeError("estimates: non-finite relative position")
     relative = dict(zip(flat[0::3], zip(flat[1::3], flat[2::3], strict=True), strict=True))
     at += neighbours * _NEIGHBOUR.size
+    flat = _repeats(_NEIGHBOUR_COV, covs).unpack_from(body, at)
+    if not _finite(*flat[1::4], *flat[2::4], *flat[3::4]):
+        raise DecodeError("estimates: non-finite relative position covariance")
+    relative_cov = dict(zip(flat[0::4], zip(flat[1::4], flat[2::4], flat[3::4]), strict=True))
+    at += covs * _NEIGHBOUR_COV.size
     flat = _repeats(_STEP, started + settled).unpack_from(body, at)
     steps = dict(zip(flat[0 : 2 * started : 2], flat[1 : 2 * started : 2], strict=True))
     done = dict(zip(flat[2 * started :: 2], flat[2 * started + 1 :: 2], strict=True))
-    if (len(relative), len(steps), len(done)) != (neighbours, started, settled):
+    if (len(relative), len(relative_cov), len(steps), len(done)) != (
+        neighbours,
+        covs,
+        started,
+        settled,
+    ):
         raise DecodeError("estimates: a neighbour or a step repeated")
     return Estimates(
         robot,
@@ -592,6 +622,7 @@ def _decode_estimates(body: memoryview) -> Estimates:
         relative_positions=relative,
         started=steps,
         settled=done,
+        relative_positions_cov=relative_cov,
         **optional,
     )
 
@@ -719,6 +750,22 @@ def _estimates(m: Estimates) -> None:
         _robot_id("estimates.relative_positions", j)
     for step in (*m.started, *m.settled):
         _within("estimates step", step, 1, 7)
+    for j, cov in m.relative_positions_cov.items():
+        _robot_id("estimates.relative_positions_cov", j)
+        _covariance("estimates.relative_positions_cov", cov)
+    if m.contact_to_com_cov is not None:
+        _covariance("estimates.contact_to_com_cov", m.contact_to_com_cov)
+    for name in ("mass_std", "moment_std"):
+        value = getattr(m, name)
+        if value is not None:
+            _within(f"estimates.{name}", value, 0.0, _math.inf)
+
+
+def _covariance(name: str, cov: tuple[float, float, float]) -> None:
+    """A 2×2 covariance ``(xx, xy, yy)``: positive semi-definite (to rounding)."""
+    xx, xy, yy = cov
+    if not (xx >= 0.0 and yy >= 0.0 and xy * xy <= xx * yy * (1.0 + 1e-9) + 1e-300):
+        raise DecodeError(f"{name} = {cov!r} is not a covariance")
 
 
 def _status(m: Status) -> None:

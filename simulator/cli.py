@@ -419,6 +419,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return bench_dashboard([])  # 16 robots at 100 Hz, 3 browsers, then a 10x replay
     if args.can:
         return _bench_can(args)
+    if args.noise or args.sweep:
+        return _bench_noise(args)
+    for option in ("seeds", "plot"):
+        if getattr(args, option) is not None:
+            raise UsageError(f"--{option} needs --noise")
+    if args.ideal_drives:
+        raise UsageError("--ideal-drives needs --noise")
     for option in ("channel", "seconds", "period_ms"):
         if getattr(args, option) is not None:
             raise UsageError(f"--{option.replace('_', '-')} needs --can")
@@ -515,6 +522,74 @@ def _bench_can(args: argparse.Namespace) -> int:
         return 1
     print(format_can_report(report))
     return 0
+
+
+def _bench_noise(args: argparse.Namespace) -> int:
+    """``heft bench --noise``: the robust estimators, the paper's and the centralized fit on
+    the same noisy runs (``--sweep``: over σ_v, with a plot)."""
+    from agent.config import Bound
+    from simulator.benchmark import PAPER_SCENARIO
+    from simulator.generate import generate_scenario
+    from simulator.noise_bench import (
+        NoiseSettings,
+        format_noise_report,
+        format_sweep,
+        plot_sweep,
+        run_noise_bench,
+        run_sweep,
+        timed,
+    )
+
+    if args.generated is not None:
+        Bound(1, 1000, "scenarios").check("--generated", args.generated)
+        seeds, label = args.generated, "generated scenarios"
+
+        def scenarios(seed: int):
+            return generate_scenario(seed)
+    else:
+        source = str(PAPER_SCENARIO) if args.scenario is None else args.scenario
+        scenario = _load(source)
+        seeds = 20 if args.seeds is None else args.seeds
+        label = f"scenario {scenario.name!r}"
+
+        def scenarios(seed: int):
+            return scenario
+
+    if args.seeds is not None:
+        Bound(1, 1000, "seeds").check("--seeds", args.seeds)
+        seeds = args.seeds
+    if args.plot is not None and not args.sweep:
+        raise UsageError("--plot needs --sweep")
+    if args.ideal_drives and args.sweep:
+        raise UsageError("--ideal-drives is for one noise level, not --sweep")
+
+    def on_seed(result) -> None:
+        state = "done" if result.robust_done else "NOT done"
+        print(
+            f"{PROG}: seed {result.seed}: robust {state} at {result.robust_time_s:.2f} s simulated",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    if args.sweep:
+        found = run_sweep(
+            scenarios,
+            seeds,
+            lambda sigma, _: print(f"{PROG}: sigma_v {sigma:g} m/s done", file=sys.stderr),
+        )
+        print(format_sweep(found, label))
+        if args.plot is not None:
+            folder = Path(args.plot)
+            folder.mkdir(parents=True, exist_ok=True)
+            print(f"plot: {plot_sweep(found, folder / 'noise_sweep.png', label)}")
+        return 0
+    settings = dataclasses.replace(NoiseSettings(), seeds=seeds)
+    if args.ideal_drives:
+        settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
+    results, wall = timed(run_noise_bench, scenarios, settings, on_seed)
+    report = format_noise_report(results, settings, label, wall)
+    print(report)
+    return 0 if report.endswith(": met") else 1
 
 
 def _bench_generated(count: int) -> int:
@@ -800,6 +875,38 @@ def _add_bench(commands: argparse._SubParsersAction) -> None:
         help="instead: the dashboard's benchmark: 16 agents publishing estimates at 100 Hz into"
         " it with 3 browsers (CPU, publish-to-browser latency p50/p99), then its memory over a"
         " 10-minute recording replayed at 10x",
+    )
+    parser.add_argument(
+        "--noise",
+        action="store_true",
+        help="instead: the noise benchmark: the robust estimators, the paper's and the"
+        " centralized batch fit (heft baseline) on the same runs at 1 cm/s and 0.5 N of sensor"
+        " noise with lagging drives of 2 %% gain error, over --seeds seeds (with --generated N:"
+        " the generated scenarios 0..N-1): median errors, ratios to the fit, runs done within"
+        " 20 s, how often the truth is inside the published 95 %% intervals",
+    )
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        metavar="N",
+        help="with --noise: seeds 0..N-1 (default: 20), in [1, 1000]",
+    )
+    parser.add_argument(
+        "--sweep",
+        action="store_true",
+        help="with --noise: over sigma_v in 0, 1 mm/s, 3 mm/s, 1 cm/s, 3 cm/s (sigma_f = 50"
+        " sigma_v): a markdown table of the medians",
+    )
+    parser.add_argument(
+        "--ideal-drives",
+        action="store_true",
+        help="with --noise: drives that apply exactly what they are commanded (no lag, no gain"
+        " error)",
+    )
+    parser.add_argument(
+        "--plot",
+        metavar="DIR",
+        help="with --sweep: write noise_sweep.png (error against sigma_v) into DIR",
     )
     parser.add_argument(
         "--seconds",

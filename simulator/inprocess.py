@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 from agent.agent import Agent
 from agent.config import AgentConfig
-from agent.protocol import Estimates, Phase, Truth
+from agent.protocol import Estimates, Measurement, Phase, Truth
 from agent.transport import InMemoryTransport, Transport
 from simulator.history import History
 from simulator.plant import Plant
@@ -94,9 +94,12 @@ def run_inprocess(
     progress: Progress | None = None,
     progress_every: int = 100,
     link: str = "memory",
+    on_measure: Callable[[list[Measurement]], None] | None = None,
 ) -> RunOutcome:
     """Run ``scenario`` to convergence (or its time limit) in this process; ``link`` is one
-    of :data:`LINKS` (see the module docstring)."""
+    of :data:`LINKS` (see the module docstring). ``on_measure`` (if given) sees every tick's
+    measurements, robot 1 first, as the agents get them (the centralized baseline fits
+    them)."""
     if link not in LINKS:
         raise ValueError(f"link must be one of {LINKS}, got {link!r}")
     quantiser = None
@@ -123,6 +126,8 @@ def run_inprocess(
             measurements = plant.measure()
             if quantiser is not None:
                 measurements = [quantiser.measurement(m) for m in measurements]
+            if on_measure is not None:
+                on_measure(measurements)
             shares = []
             for agent, measurement in zip(agents, measurements):
                 command, share = agent.step(measurement, transport.receive(agent.robot))

@@ -21,6 +21,12 @@ Paper steps (``phases`` of the JSON), from each robot's :class:`~agent.protocol.
 
 The times at which the *team* switched force regime (``excite``, ``inertia``, ``push``,
 ``done``) are given beside them, under ``team_phases``.
+
+Uncertainty (the robust estimators publish it): each robot's ``mass_std`` and ``moment_std``,
+and the covariances ``[xx, xy, yy]`` of ``contact_to_com`` and of each ``relative_positions``
+entry, as published; and under ``intervals`` (:func:`intervals`) the 95 % intervals' half-widths
+and whether the truth fell inside each: ``|error| ≤ 1.96 σ`` for m and J, the 95 % ellipse
+``eᵀ C⁻¹ e ≤ 5.99`` for a vector (its half-width given along its least certain axis).
 """
 
 from __future__ import annotations
@@ -135,6 +141,8 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
             "relative_positions": {},
             **dict.fromkeys(("centroid_offset", "com_offset", "com_observer", "omega", "phase")),
             "settled_s": {},
+            **dict.fromkeys(("mass_std", "moment_std", "contact_to_com_cov")),
+            "relative_positions_cov": {},
         }
     return {
         "mass": _number(est.mass),
@@ -147,6 +155,14 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
         "omega": _number(est.omega),
         "phase": est.phase.label,
         "settled_s": {str(step): tick * period for step, tick in sorted(est.settled.items())},
+        "mass_std": _number(est.mass_std),
+        "moment_std": _number(est.moment_std),
+        "contact_to_com_cov": None
+        if est.contact_to_com_cov is None
+        else list(est.contact_to_com_cov),
+        "relative_positions_cov": {
+            str(j): list(c) for j, c in sorted(est.relative_positions_cov.items())
+        },
     }
 
 
@@ -185,6 +201,64 @@ def errors(outcome: RunOutcome) -> dict[str, float | None]:
     """
     per_robot = [robot_errors(outcome, i) for i in range(1, outcome.scenario.n + 1)]
     return {key: _worst(e[key] for e in per_robot) for key in ERROR_KEYS}
+
+
+# ------------------------------------------------------------------------------ intervals
+SCALAR_95 = 1.959964
+"""A normal scalar is within this many standard deviations 95 % of the time."""
+PLANAR_95 = 5.991465
+"""A planar normal vector's squared Mahalanobis distance is at most this 95 % of the time."""
+
+
+def _scalar_interval(estimate, std, truth: float) -> tuple[float | None, bool | None]:
+    if estimate is None or std is None:
+        return None, None
+    half = SCALAR_95 * std
+    return half, abs(estimate - truth) <= half
+
+
+def _planar_interval(estimate, cov, truth) -> tuple[float | None, bool | None]:
+    """The 95 % ellipse's half-width along its longest axis, and whether ``truth`` is in it."""
+    if estimate is None or cov is None:
+        return None, None
+    xx, xy, yy = cov
+    det = xx * yy - xy * xy
+    largest = 0.5 * (xx + yy) + math.hypot(0.5 * (xx - yy), xy)
+    half = math.sqrt(PLANAR_95 * max(largest, 0.0))
+    ex, ey = estimate[0] - truth[0], estimate[1] - truth[1]
+    if det <= 0.0:
+        return half, ex == 0.0 and ey == 0.0
+    distance2 = (yy * ex * ex - 2.0 * xy * ex * ey + xx * ey * ey) / det
+    return half, distance2 <= PLANAR_95
+
+
+def intervals(outcome: RunOutcome, robot: int) -> dict[str, Any] | None:
+    """Robot ``robot``'s published 95 % intervals against the truth at the final instant:
+    ``{"mass": [half-width kg, inside], "moment": [...], "contact_to_com": [half-width m,
+    inside], "relative_positions": [widest half-width m, every edge inside]}``, ``None`` for a
+    quantity without an uncertainty; ``None`` for a robot that published none."""
+    est = outcome.final.estimates.get(robot)
+    if est is None or (est.mass_std is None and not est.relative_positions_cov):
+        return None
+    truth = outcome.final.truth
+    i = robot
+    edges = [
+        _planar_interval(est.relative_positions.get(j), cov, true_relative(truth, i, j))
+        for j, cov in sorted(est.relative_positions_cov.items())
+    ]
+    edges = [e for e in edges if e[0] is not None]
+    return {
+        "mass": list(_scalar_interval(est.mass, est.mass_std, truth.mass)),
+        "moment": list(_scalar_interval(est.moment, est.moment_std, truth.moment)),
+        "contact_to_com": list(
+            _planar_interval(
+                est.contact_to_com, est.contact_to_com_cov, truth.contact_to_com[i - 1]
+            )
+        ),
+        "relative_positions": [max(e[0] for e in edges), all(e[1] for e in edges)]
+        if edges
+        else [None, None],
+    }
 
 
 # ------------------------------------------------------------------------------ phases
@@ -230,6 +304,7 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
         "robots": robots,
         "truth": _truth_dict(outcome),
         "errors": errors(outcome),
+        "intervals": {str(i): intervals(outcome, i) for i in range(1, outcome.scenario.n + 1)},
         "rejections": rejection_counts(outcome.transport.get("rejections")),
     }
     if "bridges" in outcome.transport:  # a run over CAN: each robot's AGV bridge's counters
@@ -266,6 +341,7 @@ def failed_results_dict(
         "robots": {str(i): _robot_dict(None, scenario.period_s) for i in range(1, n + 1)},
         "truth": None,
         "errors": dict.fromkeys(ERROR_KEYS),
+        "intervals": {str(i): None for i in range(1, n + 1)},
         "rejections": rejection_counts(rejections),
     }
 
@@ -364,6 +440,7 @@ def format_table(outcome: RunOutcome) -> str:
     regimes = ", ".join(f"{name} {t:.2f} s" for name, t in team_phases(outcome).items())
     lines.append("(start: the first robot began the step; end: the last robot's estimate settled)")
     lines.append(f"team force regimes from: {regimes or '-'}")
+    lines += _interval_lines(outcome)
     rejected = _rejections_line(outcome.transport.get("rejections"))
     if rejected:
         lines.append(rejected)
@@ -371,6 +448,40 @@ def format_table(outcome: RunOutcome) -> str:
     if bridges:
         lines.append(bridges)
     return "\n".join(lines)
+
+
+def _interval_lines(outcome: RunOutcome) -> list[str]:
+    """The 95 % intervals' half-widths and whether the truth is inside (robots that published
+    an uncertainty; none: no lines)."""
+    rows = {i: intervals(outcome, i) for i in range(1, outcome.scenario.n + 1)}
+    if not any(rows.values()):
+        return []
+    lines = [
+        "",
+        f"{'95 % intervals':<14} {'m ±%':>8} {'J ±%':>8} {'ctc ±mm':>9} {'z_ij ±mm':>9}"
+        "   truth inside",
+    ]
+    truth = outcome.final.truth
+    for i, row in rows.items():
+        if row is None:
+            lines.append(f"{'robot ' + str(i):<14} {'-':>8} {'-':>8} {'-':>9} {'-':>9}")
+            continue
+        inside = [
+            name
+            for name, key in (("m", "mass"), ("J", "moment"), ("ctc", "contact_to_com"))
+            if row[key][1]
+        ]
+        if row["relative_positions"][1]:
+            inside.append("z_ij")
+        lines.append(
+            f"{'robot ' + str(i):<14}"
+            f" {_fmt(_scaled(row['mass'][0], 100 / truth.mass), '.3f', 8)}"
+            f" {_fmt(_scaled(row['moment'][0], 100 / truth.moment), '.3f', 8)}"
+            f" {_fmt(_scaled(row['contact_to_com'][0], 1000), '.2f', 9)}"
+            f" {_fmt(_scaled(row['relative_positions'][0], 1000), '.2f', 9)}"
+            f"   {' '.join(inside) or 'none'}"
+        )
+    return lines
 
 
 def _bridges_line(bridges: dict | None) -> str:

@@ -349,12 +349,14 @@ COMPANIONS: dict[tuple[str, float], dict[str, Any]] = {
     ("agent.kick_force", 1000.0): _MAX_FORCE,
     ("agent.inertia_force", 1000.0): _MAX_FORCE,
     ("agent.push_min_force", 1000.0): _MAX_FORCE,
+    ("agent.push_force", 1000.0): _MAX_FORCE,
 }
 
 
 def _companions(key: str, value: float) -> dict[str, Any]:
-    if key == "agent.max_force" and value < 1.0:  # the other forces are at most max_force
-        return {f"agent.{k}": value for k in ("kick_force", "inertia_force", "push_min_force")}
+    if key == "agent.max_force" and value < 3.0:  # the other forces are at most max_force
+        forces = ("kick_force", "inertia_force", "push_min_force", "push_force")
+        return {f"agent.{k}": value for k in forces}
     return COMPANIONS.get((key, value), {})
 
 

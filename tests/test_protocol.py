@@ -121,6 +121,20 @@ ESTIMATES_FULL = Estimates(
     started={1: 0, 2: 150, 4: 900},
     settled={1: 140, 4: 1200},
 )
+ESTIMATES_UNCERTAIN = Estimates(
+    robot=3,
+    tick=900,
+    phase=Phase.DONE,
+    phase_since=880,
+    relative_positions={2: (0.5, -1.25), 4: (-2.0, 0.0)},
+    mass=5.01,
+    moment=12.4,
+    contact_to_com=(0.2, -0.6),
+    mass_std=0.02,
+    moment_std=0.05,
+    contact_to_com_cov=(4e-6, -1e-6, 9e-6),
+    relative_positions_cov={2: (1e-6, 0.0, 2e-6), 4: (3e-6, 1e-6, 1e-6)},
+)
 ESTIMATES_PARTIAL = Estimates(
     robot=4,
     tick=10,
@@ -169,6 +183,7 @@ MESSAGES = {
     "estimates-empty": ESTIMATES_EMPTY,
     "estimates-full": ESTIMATES_FULL,
     "estimates-partial": ESTIMATES_PARTIAL,
+    "estimates-uncertain": ESTIMATES_UNCERTAIN,
     "status": STATUS,
     "status-plain": STATUS_PLAIN,
     "truth": TRUTH,
@@ -272,6 +287,10 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         instant=ticks,
     )
     maybe = lambda strategy: st.none() | strategy  # noqa: E731
+    # (xx, ρ √(xx yy), yy): a covariance whenever xx, yy ≥ 0; anything, from anything.
+    covariances = st.tuples(numbers, numbers, st.floats(-1.0, 1.0)).map(
+        lambda t: (t[0], t[2] * math.sqrt(abs(t[0])) * math.sqrt(abs(t[1])), t[1])
+    )
     estimates = st.builds(
         Estimates,
         robot=ids,
@@ -290,6 +309,10 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         contact_to_com=maybe(pairs),
         started=st.dictionaries(small, ticks, max_size=7),
         settled=st.dictionaries(small, ticks, max_size=7),
+        mass_std=maybe(numbers),
+        moment_std=maybe(numbers),
+        contact_to_com_cov=maybe(covariances),
+        relative_positions_cov=st.dictionaries(ids, covariances, max_size=6),
     )
     return st.one_of(
         st.builds(Measurement, robot=ids, tick=ticks, time_s=numbers, velocity=pairs, force=pairs),
@@ -353,6 +376,21 @@ DOMAIN_CASES = {
 @pytest.mark.parametrize("message", DOMAIN_CASES.values(), ids=DOMAIN_CASES.keys())
 def test_values_out_of_their_domain_are_refused(message) -> None:
     rejects(type(message), encode(message))
+
+
+NOT_UNCERTAINTIES = {
+    "negative mass std": dict(mass_std=-0.1),
+    "negative moment std": dict(moment_std=-1e-9),
+    "negative variance": dict(contact_to_com_cov=(-1e-6, 0.0, 1e-6)),
+    "correlation above one": dict(contact_to_com_cov=(1e-6, 2e-6, 1e-6)),
+    "an edge's negative variance": dict(relative_positions_cov={2: (1e-6, 0.0, -1e-6)}),
+    "a covariance of robot 0": dict(relative_positions_cov={0: (1e-6, 0.0, 1e-6)}),
+}
+
+
+@pytest.mark.parametrize("changes", NOT_UNCERTAINTIES.values(), ids=NOT_UNCERTAINTIES.keys())
+def test_uncertainties_out_of_their_domain_are_refused(changes: dict) -> None:
+    assert "estimates" in str(rejects(Estimates, encode(_with(ESTIMATES_UNCERTAIN, **changes))))
 
 
 def test_json_messages_are_checked_too() -> None:
@@ -419,6 +457,7 @@ STRUCT_SAMPLES = {
     "estimates-empty": (Estimates, ESTIMATES_EMPTY),
     "estimates-full": (Estimates, ESTIMATES_FULL),
     "estimates-partial": (Estimates, ESTIMATES_PARTIAL),
+    "estimates-uncertain": (Estimates, ESTIMATES_UNCERTAIN),
 }
 
 
@@ -458,6 +497,9 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
         _with(ESTIMATES_FULL, contact_to_com=(0.0, bad)),
         _with(ESTIMATES_PARTIAL, omega=bad),
         _with(ESTIMATES_FULL, relative_positions={1: (0.5, -1.25), 3: (bad, 0.0)}),
+        _with(ESTIMATES_UNCERTAIN, mass_std=bad),
+        _with(ESTIMATES_UNCERTAIN, contact_to_com_cov=(1e-6, bad, 1e-6)),
+        _with(ESTIMATES_UNCERTAIN, relative_positions_cov={2: (1e-6, 0.0, bad)}),
     ]
     for message in corrupt:
         assert "non-finite" in str(rejects(type(message), encode(message)))
@@ -476,8 +518,8 @@ def test_share_flow_count_must_match_its_bytes() -> None:
     rejects(Share, payload[:-1])  # a flow cut short
 
 
-ESTIMATES_FIXED = struct.Struct("<HqBqHBBB")
-"""robot, tick, phase, phase_since, presence bits, neighbours, started, settled."""
+ESTIMATES_FIXED = struct.Struct("<HqBqHBBBB")
+"""robot, tick, phase, phase_since, presence bits, neighbours, covariances, started, settled."""
 
 
 def _estimates_fixed(message: Estimates, **changes) -> bytes:
@@ -492,6 +534,7 @@ def _estimates_fixed(message: Estimates, **changes) -> bytes:
                 "phase_since",
                 "present",
                 "neighbours",
+                "covariances",
                 "started",
                 "settled",
             ),
@@ -517,7 +560,7 @@ def test_estimates_with_no_such_phase_are_refused(phase: int) -> None:
     assert "phase" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_FULL, phase=phase)))
 
 
-@pytest.mark.parametrize("present", [1 << 9, 1 << 15, 0xFFFF])
+@pytest.mark.parametrize("present", [1 << 12, 1 << 15, 0xFFFF])
 def test_estimates_presence_bits_past_the_fields_are_refused(present: int) -> None:
     assert "presence" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_EMPTY, present=present)))
 
@@ -531,6 +574,8 @@ ESTIMATES_MISCOUNTED = {
     "255 neighbours": (ESTIMATES_FULL, dict(neighbours=255)),
     "a step more": (ESTIMATES_FULL, dict(started=4)),
     "a settled step fewer": (ESTIMATES_FULL, dict(settled=1)),
+    "a covariance more": (ESTIMATES_UNCERTAIN, dict(covariances=3)),
+    "a covariance fewer": (ESTIMATES_UNCERTAIN, dict(covariances=1)),
 }
 
 

@@ -36,6 +36,11 @@ class ComRegression:
         """``φ = (n/J) R(−α) Qᵀ f``."""
         return rotate(self.base, -alpha)
 
+    @property
+    def started(self) -> bool:
+        """Whether the first sample has started the filters."""
+        return self.regression.started
+
     def update(self, omega: float, alpha: float, dt: float) -> None:
         """Feed ``ω`` and the rotation ``α`` since the reference instant at the end of an
         interval ``dt`` (the first call, at the reference instant, starts the filters)."""

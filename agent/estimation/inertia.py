@@ -31,6 +31,11 @@ class InertiaEstimator:
             filter_gain, outputs=1, params=1, forgetting=forgetting
         )
 
+    @property
+    def started(self) -> bool:
+        """Whether the first sample has started the filters."""
+        return self.regression.started
+
     def update(self, omega: float, torque: float, dt: float) -> None:
         """Feed ``ω`` at the end of an interval ``dt`` during which the team's torque was
         ``torque`` (``±k w``); the first call only starts the filters."""

@@ -23,6 +23,11 @@ class MassEstimator:
             filter_gain, outputs=2, params=1, forgetting=forgetting
         )
 
+    @property
+    def started(self) -> bool:
+        """Whether the first sample has started the filters."""
+        return self.regression.started
+
     def update(self, com_velocity: Vec2, dt: float) -> None:
         """Feed ``ṗ_C`` at the end of an interval ``dt`` (the first call starts the filters)."""
         if not self.regression.started:

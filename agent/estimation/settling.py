@@ -7,12 +7,20 @@ drift, not at jitter: lost messages make estimates tremble by tiny amounts from 
 next, which must not keep a converged estimate from counting as settled.
 O(size of the estimate) per update.
 
+An estimate that comes with its standard deviation ``σ`` (the robust estimators' do) is judged
+by it instead: it has settled once, for ``window`` updates running, ``σ`` is at most
+``uncertainty`` times its size (or times a ``scale`` given with it, for an estimate that may be
+small: an offset measured against the load's size). An estimate that an iteration computes
+from uncertain inputs (Step 2's consensus: its ``σ`` is its inputs', not how far the iteration
+still has to go) is judged by both: ``σ`` small enough, and no drift beyond ``3σ``.
+
 A robot watches six of its estimates (:class:`SettleDetectors`); the team leaves a phase once
 every robot's estimates of that phase have settled (:mod:`agent.phase_machine`).
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -21,18 +29,35 @@ from dataclasses import dataclass
 class SettleDetector:
     """Tracks whether a (vector) estimate has stopped moving; remembers when it first did."""
 
-    def __init__(self, window: int, tolerance: float, floor: float = 1e-3):
+    def __init__(
+        self,
+        window: int,
+        tolerance: float,
+        floor: float = 1e-3,
+        uncertainty: float = 0.0,
+        iterated: bool = False,
+    ):
         self.window = max(1, int(window))
         self.tolerance = tolerance
         self.floor = floor
+        self.uncertainty = uncertainty
+        self.iterated = iterated
+        """Whether an estimate with a standard deviation is judged by its drift as well."""
         self.streak = 0
         self.first_settled: int | None = None
         self._past: deque[tuple[float, ...]] = deque(maxlen=self.window + 1)
 
-    def update(self, value: Sequence[float], tick: int) -> bool:
-        """Feed the estimate at ``tick``; returns whether it is settled now."""
+    def update(
+        self, value: Sequence[float], tick: int, std: float | None = None, scale: float = 0.0
+    ) -> bool:
+        """Feed the estimate at ``tick`` (with its standard deviation ``std``, same units, if
+        it has one, and the ``scale`` its size is at least taken to be); returns whether it is
+        settled now."""
         past = self._past
-        if past:
+        if std is not None and not (self.iterated and past):
+            size = max(math.sqrt(sum(v * v for v in value)), scale)
+            self.streak = self.streak + 1 if std <= self.uncertainty * size else 0
+        elif past:
             last, oldest = past[-1], past[0]
             size2 = step2 = drift2 = 0.0
             for v, a, b in zip(value, last, oldest):
@@ -40,7 +65,11 @@ class SettleDetector:
                 step2 += (v - a) * (v - a)
                 drift2 += (v - b) * (v - b)
             limit2 = self.tolerance * self.tolerance * max(size2, self.floor * self.floor)
+            if std is not None:  # iterated: both its drift and its own uncertainty
+                limit2 = max(limit2, 9.0 * std * std)
             quiet = step2 <= limit2 and drift2 <= limit2
+            if std is not None and std > self.uncertainty * max(math.sqrt(size2), scale):
+                quiet = False
             self.streak = self.streak + 1 if quiet else 0
         past.append(tuple(value))
         if self.settled and self.first_settled is None:
@@ -50,6 +79,13 @@ class SettleDetector:
     @property
     def settled(self) -> bool:
         return self.streak >= self.window
+
+
+ITERATED = {0, 1, 2, 3}
+"""The detectors (by position in :class:`SettleDetectors`) judged by their drift as well:
+the distances, the centroid, the spread and ``Ĵ``, each of which a noise-free run would
+otherwise call settled on its first window (their uncertainty then is nil, not their error).
+``z_C`` and ``m̂``, judged by uncertainty alone, settle within 20 s at 1 cm/s."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,9 +106,15 @@ class SettleDetectors:
     """Step 7: ``m̂``."""
 
     @classmethod
-    def of(cls, window: int, tolerance: float) -> SettleDetectors:
+    def of(cls, window: int, tolerance: float, uncertainty: float = 0.0) -> SettleDetectors:
         """Six detectors alike (see :class:`SettleDetector`)."""
-        return cls(*(SettleDetector(window, tolerance) for _ in range(6)))
+        iterated = ITERATED
+        return cls(
+            *(
+                SettleDetector(window, tolerance, uncertainty=uncertainty, iterated=i in iterated)
+                for i in range(6)
+            )
+        )
 
     def first_settled(self) -> dict[int, int]:
         """Paper step (1..7) → the tick its estimate first settled (steps not settled yet are

@@ -1,0 +1,189 @@
+"""Linear least squares, one row at a time: the solver under every robust estimator.
+
+For rows ``a_k ∈ R^p`` and targets ``b_k``, the estimate ``p̂`` minimises
+``Σ_k λ^{N−k} (a_kᵀ p − b_k)²`` (``λ ∈ (0, 1]``: exponential forgetting, 1 = none). Only the
+normal equations are kept, ``M = Σ λ^{N−k} a_k a_kᵀ``, ``v = Σ λ^{N−k} a_k b_k``,
+``Σ λ^{N−k} b_k²`` and the (forgotten) row count ``N``: O(p²) per row, whatever the run's
+length. Then ``p̂ = M⁻¹ v`` (Cholesky: ``M`` is symmetric and, once the rows span ``R^p``,
+positive definite), the residual sum of squares is ``Σ b² − p̂ᵀ v``, and the textbook
+covariance ``σ̂² M⁻¹`` with ``σ̂² = RSS / (N − p)`` — for independent residuals. The estimators
+say how they scale it when theirs are not.
+
+Plain floats, no numpy: ``p ≤ 4`` here, where small arrays cost more than they save.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+
+class LeastSquares:
+    """Accumulates rows ``a_kᵀ p ≈ b_k``; :meth:`solve` gives ``p̂`` and ``M⁻¹``."""
+
+    def __init__(self, params: int, forgetting: float = 1.0):
+        if params < 1:
+            raise ValueError("params must be at least 1")
+        if not 0.0 < forgetting <= 1.0:
+            raise ValueError("forgetting must be in (0, 1]")
+        self.params = params
+        self.forgetting = forgetting
+        self.rows = 0.0
+        """The (forgotten) number of rows."""
+        self._m = [0.0] * (params * params)
+        self._v = [0.0] * params
+        self._bb = 0.0
+
+    def add(self, row: Sequence[float], target: float) -> None:
+        """One more row ``rowᵀ p ≈ target``."""
+        p, m, v, lam = self.params, self._m, self._v, self.forgetting
+        if lam != 1.0:
+            for i in range(p * p):
+                m[i] *= lam
+            for i in range(p):
+                v[i] *= lam
+            self._bb *= lam
+            self.rows *= lam
+        for i in range(p):
+            ai = row[i]
+            if ai == 0.0:
+                continue
+            v[i] += ai * target
+            base = i * p
+            for j in range(p):
+                m[base + j] += ai * row[j]
+        self._bb += target * target
+        self.rows += 1.0
+
+    def solve(self) -> Solution | None:
+        """``p̂``, ``M⁻¹`` and ``σ̂²``, or ``None`` while the rows do not determine ``p``."""
+        p = self.params
+        if self.rows <= p:
+            return None
+        chol = _cholesky(self._m, p)
+        if chol is None:
+            return None
+        inverse = _inverse_from_cholesky(chol, p)
+        v = self._v
+        estimate = tuple(sum(inverse[i * p + j] * v[j] for j in range(p)) for i in range(p))
+        rss = max(self._bb - sum(e * b for e, b in zip(estimate, v)), 0.0)
+        return Solution(estimate, inverse, rss / (self.rows - p), self.rows)
+
+
+CORRELATION_TIME = 0.2
+"""s: how long the errors of a robust fit's rows (an angle, a displacement: integrals of noisy
+velocities) stay correlated; its rows count as one independent row per this time."""
+
+
+class ReciprocalFit:
+    """A fit one of whose parameters, ``p[index]``, is the reciprocal of the estimate (``1/J``,
+    ``1/m``): :attr:`estimate` is ``1/p̂[index]`` once the fit gives it positive, and
+    :attr:`std` its standard deviation with the rows counted as in :data:`CORRELATION_TIME`.
+    Subclasses add rows to :attr:`fit`, advance :attr:`t` and call :meth:`_solve`."""
+
+    index = 2
+    min_rows = 10
+
+    def __init__(self, params: int, forgetting: float = 1.0):
+        self.fit = LeastSquares(params, forgetting)
+        self.t = 0.0
+        """s since the first sample."""
+        self._solution: Solution | None = None
+
+    def _solve(self) -> None:
+        solution = self.fit.solve() if self.fit.rows >= self.min_rows else None
+        positive = solution is not None and solution.estimate[self.index] > 0.0
+        self._solution = solution if positive else None
+
+    @property
+    def estimate(self) -> float | None:
+        """``1/p̂[index]`` (``None`` until the fit gives it positive)."""
+        fit = self._solution
+        return None if fit is None else 1.0 / fit.estimate[self.index]
+
+    @property
+    def std(self) -> float | None:
+        """The standard deviation of :attr:`estimate`."""
+        fit = self._solution
+        if fit is None:
+            return None
+        return fit.reciprocal(self.index, CORRELATION_TIME * fit.rows / max(self.t, 1e-9))[1]
+
+    @property
+    def covariance(self) -> tuple[tuple[float]] | None:
+        """``((std²,),)``."""
+        std = self.std
+        return None if std is None else ((std * std,),)
+
+
+class Solution:
+    """A solved fit: ``estimate`` ``p̂``, ``inverse`` ``M⁻¹`` (row-major), ``variance``
+    ``σ̂²`` (the residuals' mean square) and the number of ``rows``."""
+
+    __slots__ = ("estimate", "inverse", "variance", "rows")
+
+    def __init__(self, estimate, inverse, variance: float, rows: float):
+        self.estimate: tuple[float, ...] = estimate
+        self.inverse: tuple[float, ...] = inverse
+        self.variance = variance
+        self.rows = rows
+
+    def covariance(self, scale: float = 1.0) -> list[list[float]]:
+        """``scale · σ̂² M⁻¹``."""
+        p = len(self.estimate)
+        k = scale * self.variance
+        return [[k * self.inverse[i * p + j] for j in range(p)] for i in range(p)]
+
+    def reciprocal(self, index: int, scale: float = 1.0) -> tuple[float, float]:
+        """``1/p̂_index`` and its standard deviation ``std(p̂_index) / p̂_index²`` (first
+        order), for a parameter fitted as the reciprocal of a positive quantity (``1/J``,
+        ``1/m``)."""
+        p = self.estimate[index]
+        gradient = [0.0] * len(self.estimate)
+        gradient[index] = 1.0
+        return 1.0 / p, math.sqrt(self.variance_of(gradient, scale)) / (p * p)
+
+    def variance_of(self, gradient: Sequence[float], scale: float = 1.0) -> float:
+        """``scale · σ̂² gᵀ M⁻¹ g``: the variance of a function of ``p̂`` with gradient ``g``."""
+        p = len(self.estimate)
+        inv = self.inverse
+        total = 0.0
+        for i in range(p):
+            gi = gradient[i]
+            if gi:
+                total += gi * sum(inv[i * p + j] * gradient[j] for j in range(p))
+        return max(scale * self.variance * total, 0.0)
+
+
+def _cholesky(m: list[float], p: int) -> list[float] | None:
+    """Lower-triangular ``L`` with ``L Lᵀ = m`` (row-major), or ``None`` unless ``m`` is
+    positive definite to working precision."""
+    scale = max(abs(m[i * p + i]) for i in range(p))
+    if scale == 0.0 or not math.isfinite(scale):
+        return None
+    low = [0.0] * (p * p)
+    for i in range(p):
+        for j in range(i + 1):
+            total = m[i * p + j] - sum(low[i * p + k] * low[j * p + k] for k in range(j))
+            if i == j:
+                if total <= 1e-13 * scale:
+                    return None
+                low[i * p + i] = math.sqrt(total)
+            else:
+                low[i * p + j] = total / low[j * p + j]
+    return low
+
+
+def _inverse_from_cholesky(low: list[float], p: int) -> tuple[float, ...]:
+    """``(L Lᵀ)⁻¹`` from ``L``: invert ``L``, then ``L⁻ᵀ L⁻¹``."""
+    inv_low = [0.0] * (p * p)
+    for i in range(p):
+        inv_low[i * p + i] = 1.0 / low[i * p + i]
+        for j in range(i):
+            total = sum(low[i * p + k] * inv_low[k * p + j] for k in range(j, i))
+            inv_low[i * p + j] = -total / low[i * p + i]
+    return tuple(
+        sum(inv_low[k * p + i] * inv_low[k * p + j] for k in range(max(i, j), p))
+        for i in range(p)
+        for j in range(p)
+    )

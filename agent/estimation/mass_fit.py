@@ -1,0 +1,66 @@
+"""Step 7 under noise: ``m`` from the COM's displacement, not from its velocity.
+
+Under the team's common force ``f`` the COM accelerates at ``n f / m`` (Step 7), so from the
+mass fit's first instant ``t₀``
+
+    p_C(t) − p_C(t₀) = v₀ (t − t₀) + ½ (n f / m) (t − t₀)²,
+
+linear in ``(v₀ₓ, v₀ᵧ, 1/m)`` with one row per axis. A robot measures the displacement without
+differentiating anything: ``p_C = p_Ci − o`` with ``o = p_Ci − p_C = z_i + z_C`` (Steps 2 and
+5), a vector of the load that turns with it, so
+
+    p_C(t) − p_C(t₀) = ∫_{t₀}^{t} ṗ_Ci dt − (I − R(θ(t₀) − θ(t))) o(t),
+
+the integral of its own velocity (trapezoid) and the current estimate of ``o`` turned back by
+the load's rotation since ``t₀``. Where eq. (7)'s ``ṗ_C = ṗ_Ci − ω o⊥`` carries ω's noise
+times the offset (centimetres per second), the displacement's error is the velocity noise's
+random walk.
+
+Uncertainty: the fit's ``σ̂² M⁻¹`` scaled for correlated residuals as in
+:mod:`agent.estimation.inertia_fit`; ``std(m̂) = std(1/m) m̂²``.
+"""
+
+from __future__ import annotations
+
+from agent.estimation.geometry import Vec2, rotate
+from agent.estimation.least_squares import ReciprocalFit
+
+
+class MassFit(ReciprocalFit):
+    """``m`` from the COM's displacement while the team pushes with ``f`` each."""
+
+    min_rows = 20  # two rows a sample
+
+    def __init__(self, n: int, force: Vec2, forgetting: float = 1.0):
+        super().__init__(3, forgetting)  # rows [t, 0, ½ n f_x t²], [0, t, ½ n f_y t²]
+        self.total_force = (n * force[0], n * force[1])
+        self.started = False
+        self._velocity: Vec2 = (0.0, 0.0)
+        self._travel: Vec2 = (0.0, 0.0)
+        """``∫ṗ_Ci dt`` since the first sample."""
+        self._angle0 = 0.0
+
+    def update(self, velocity: Vec2, offset: Vec2, angle: float, dt: float) -> None:
+        """Feed the robot's contact velocity ``ṗ_Ci``, the offset ``o = p_Ci − p_C`` and the
+        load's rotation ``angle`` at the end of an interval ``dt`` of pushing (the first
+        call starts)."""
+        if not self.started:
+            self.started = True
+            self._velocity, self._angle0 = velocity, angle
+            return
+        v0 = self._velocity
+        travel = self._travel
+        self._travel = (
+            travel[0] + 0.5 * dt * (v0[0] + velocity[0]),
+            travel[1] + 0.5 * dt * (v0[1] + velocity[1]),
+        )
+        self._velocity = velocity
+        self.t += dt
+        back = rotate(offset, self._angle0 - angle)
+        dx = self._travel[0] - (offset[0] - back[0])
+        dy = self._travel[1] - (offset[1] - back[1])
+        t, (fx, fy) = self.t, self.total_force
+        half = 0.5 * t * t
+        self.fit.add((t, 0.0, half * fx), dx)
+        self.fit.add((0.0, t, half * fy), dy)
+        self._solve()

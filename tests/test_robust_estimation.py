@@ -1,0 +1,297 @@
+"""The robust estimators (``[agent] estimator = "robust"``), each alone against the rigid-body
+model: exact without noise, and under noise far better than the paper's estimators with the
+same samples, with standard deviations of the size of their errors."""
+
+from __future__ import annotations
+
+import inspect
+import math
+
+import numpy as np
+import pytest
+
+from agent.config import AgentConfig, AgentTuning, ConfigError, Estimators, from_table, to_toml
+from agent.estimation.arc_fit import ArcRelativePosition
+from agent.estimation.com_fit import ComFit
+from agent.estimation.estimator import Estimator
+from agent.estimation.geometry import rotate
+from agent.estimation.inertia_fit import InertiaFit
+from agent.estimation.least_squares import LeastSquares
+from agent.estimation.mass_fit import MassFit
+from agent.estimation.relative_position import RelativePosition
+from agent.estimation.settling import SettleDetector, SettleDetectors
+from agent.phase_machine import PhaseMachine
+from agent.protocol import Phase
+
+DT = 0.01
+
+
+# ------------------------------------------------------------------------------ least squares
+def test_least_squares_matches_numpy() -> None:
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(200, 4))
+    b = a @ np.array([1.0, -2.0, 0.5, 3.0]) + 0.01 * rng.normal(size=200)
+    fit = LeastSquares(4)
+    for row, target in zip(a, b):
+        fit.add(tuple(row), float(target))
+    solution = fit.solve()
+    expected, rss, *_ = np.linalg.lstsq(a, b, rcond=None)
+    assert solution.estimate == pytest.approx(expected, abs=1e-10)
+    assert solution.variance == pytest.approx(rss[0] / (200 - 4), rel=1e-6)
+    covariance = solution.variance * np.linalg.inv(a.T @ a)
+    assert np.array(solution.covariance()) == pytest.approx(covariance, rel=1e-6, abs=1e-15)
+    g = np.array([0.0, 1.0, -1.0, 2.0])
+    assert solution.variance_of(g) == pytest.approx(g @ covariance @ g, rel=1e-6)
+
+
+def test_least_squares_is_none_until_the_rows_determine_it() -> None:
+    fit = LeastSquares(3)
+    assert fit.solve() is None
+    for _ in range(10):
+        fit.add((1.0, 2.0, 3.0), 1.0)  # always the same row: rank 1
+    assert fit.solve() is None
+    with pytest.raises(ValueError):
+        LeastSquares(0)
+    with pytest.raises(ValueError):
+        LeastSquares(2, forgetting=0.0)
+
+
+def test_least_squares_forgetting_follows_a_change() -> None:
+    fit = LeastSquares(1, forgetting=math.exp(-DT / 0.5))
+    for k in range(1000):
+        fit.add((1.0,), 1.0 if k < 500 else 2.0)
+    assert fit.solve().estimate[0] == pytest.approx(2.0, abs=1e-3)
+
+
+# ------------------------------------------------------------------------------ Step 1
+def _arc(r: float, phase0: float, omega, sigma: float, seconds: float, seed: int):
+    """Samples of ``ż_ij`` for a contact pair ``r`` apart on a load turning by ``omega(t)``
+    (its integral given as ``(ω(t), θ(t))``), with white noise ``σ`` per axis and robot, and
+    the true ``z_ij`` at the last sample."""
+    rng = np.random.default_rng(seed)
+    samples = []
+    for k in range(round(seconds / DT)):
+        w, angle = omega(k * DT)
+        z = (r * math.cos(phase0 + angle), r * math.sin(phase0 + angle))
+        noise = math.sqrt(2.0) * sigma * rng.normal(size=2)
+        samples.append((-w * z[1] + noise[0], w * z[0] + noise[1]))
+    return samples, z
+
+
+def _varying(t: float) -> tuple[float, float]:
+    return 0.3 + 0.2 * math.sin(t), 0.3 * t - 0.2 * math.cos(t) + 0.2
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_arc_fit_is_exact_without_noise(sign: float) -> None:
+    def omega(t):
+        w, a = _varying(t)
+        return sign * w, sign * a
+
+    samples, z = _arc(1.7, 0.4, omega, 0.0, 8.0, 1)
+    edge = ArcRelativePosition()
+    for zdot in samples:
+        edge.update(zdot, DT)
+    assert edge.distance == pytest.approx(1.7, abs=1e-5)
+    assert math.dist(edge.estimate, z) < 2e-5
+
+
+def test_arc_fit_waits_for_an_arc_and_for_motion() -> None:
+    edge = ArcRelativePosition()
+    for _ in range(50):
+        edge.update((0.0, 0.0), DT)  # at rest: nothing to fit
+    assert not edge.moving and edge.estimate is None and edge.covariance is None
+    samples, _ = _arc(1.5, 0.0, _varying, 0.01, 0.05, 2)
+    for zdot in samples:
+        edge.update(zdot, DT)
+    assert edge.estimate is None  # five samples: no circle yet
+
+
+def test_arc_fit_under_noise_beats_the_paper_and_knows_its_error() -> None:
+    """1 cm/s per axis and robot, 10 s of a load turning at 0.3 ± 0.2 rad/s, 20 seeds."""
+    arc_errors, paper_errors, ratios = [], [], []
+    for seed in range(20):
+        samples, z = _arc(1.5, seed, _varying, 0.01, 10.0, seed)
+        edge, paper = ArcRelativePosition(), RelativePosition(5.0)
+        for zdot in samples:
+            edge.update(zdot, DT)
+            paper.update(zdot, DT)
+        error = np.subtract(edge.estimate, z)
+        arc_errors.append(np.linalg.norm(error))
+        paper_errors.append(math.dist(paper.estimate, z))
+        (xx, xy), (_, yy) = edge.covariance
+        ratios.append(error @ np.linalg.inv([[xx, xy], [xy, yy]]) @ error / 2.0)
+    assert np.median(arc_errors) < 0.01  # m: under a centimetre
+    assert np.median(arc_errors) < 0.2 * np.median(paper_errors)
+    assert 0.3 < np.mean(ratios) < 3.0  # the published covariance is of the error's size
+
+
+# ------------------------------------------------------------------------------ Step 4
+def _spin(moment: float, seconds: float, noise: float = 0.0, seed: int = 0):
+    """A load spun by ``±τ`` in turns of 0.5 s: ``(angle, torque)`` samples."""
+    rng = np.random.default_rng(seed)
+    theta, omega, out = 0.3, 0.5, [(0.3, 0.0)]
+    for k in range(round(seconds / DT)):
+        torque = 7.0 if (k // 50) % 2 == 0 else -7.0
+        theta += omega * DT + 0.5 * torque / moment * DT * DT
+        omega += torque / moment * DT
+        out.append((theta + noise * rng.normal(), torque))
+    return out
+
+
+def test_inertia_fit_is_exact_without_noise() -> None:
+    fit = InertiaFit()
+    assert fit.estimate is None and fit.std is None and fit.covariance is None
+    for angle, torque in _spin(12.3795, 2.0):
+        fit.update(angle, torque, DT)
+    assert fit.estimate == pytest.approx(12.3795, rel=1e-9)
+
+
+def test_inertia_fit_std_grows_with_the_angle_noise_and_the_torque_scale() -> None:
+    stds = []
+    for noise in (1e-4, 1e-3):
+        fit = InertiaFit()
+        for angle, torque in _spin(12.0, 3.0, noise, 7):
+            fit.update(angle, torque, DT)
+        assert fit.estimate == pytest.approx(12.0, rel=0.05)
+        stds.append(fit.std)
+    assert stds[1] > 5 * stds[0]
+    scaled = InertiaFit(torque_scale_std=0.01)
+    for angle, torque in _spin(12.0, 3.0):
+        scaled.update(angle, torque, DT)
+    assert scaled.std == pytest.approx(0.01 * 12.0, rel=1e-3)  # Ĵ ∝ w: 1 % of w, 1 % of J
+
+
+# ------------------------------------------------------------------------------ Step 5
+def test_com_fit_is_exact_without_noise() -> None:
+    """A load pushed by ``n`` robots with ``f`` each turns by ``J θ̈ = n (Q R(α) c)ᵀ f``."""
+    n, moment, force, c = 4, 12.0, (0.0, 3.0), (-0.12, 0.05)
+    theta, omega, fine = 0.0, 0.6, 100
+    fit = ComFit(n, moment, force)
+    fit.update(0.0, DT)
+    for _ in range(300):
+        for _ in range(fine):  # the plant, finer than the samples
+            zc = rotate(c, theta)
+            torque = n * (-zc[1] * force[0] + zc[0] * force[1])
+            omega += torque / moment * DT / fine
+            theta += omega * DT / fine
+        fit.update(theta, DT)
+    assert math.dist(fit.estimate, c) < 1e-5
+    assert math.dist(fit.com_offset(theta), rotate(c, theta)) < 1e-5
+    assert fit.std < 1e-3
+
+
+# ------------------------------------------------------------------------------ Step 7
+def test_mass_fit_is_exact_without_noise() -> None:
+    """The COM accelerates at ``n f / m``; a contact ``o`` away from it turns at 0.8 rad/s."""
+    n, mass, force, offset0 = 4, 5.0, (0.0, 3.0), (1.2, -0.7)
+    fit = MassFit(n, force)
+    v0 = (0.1, -0.2)
+    for k in range(400):
+        t = k * DT
+        angle = 0.8 * t
+        offset = rotate(offset0, angle)  # p_Ci − p_C
+        com_velocity = (v0[0] + n * force[0] / mass * t, v0[1] + n * force[1] / mass * t)
+        contact_velocity = (com_velocity[0] - 0.8 * offset[1], com_velocity[1] + 0.8 * offset[0])
+        fit.update(contact_velocity, offset, angle, DT)
+    assert fit.estimate == pytest.approx(mass, rel=1e-4)
+    assert fit.std < 1e-3
+
+
+def test_every_robust_estimator_has_the_common_shape() -> None:
+    for est in (
+        ArcRelativePosition(),
+        InertiaFit(),
+        ComFit(4, 2.0, (0.0, 1.0)),
+        MassFit(4, (0, 1)),
+    ):
+        cls = type(est)
+        assert isinstance(est, Estimator), cls
+        assert list(inspect.signature(cls.update).parameters)[-1] == "dt", cls
+        assert est.estimate is None and est.covariance is None, cls
+
+
+# ------------------------------------------------------------------------------ settling
+def test_settling_by_uncertainty() -> None:
+    det = SettleDetector(3, 1e-4, uncertainty=0.01)
+    for tick in range(10):  # a 2 % standard deviation: never, however still it is
+        assert not det.update((1.0,), tick, std=0.02)
+    for tick in range(10, 12):
+        assert not det.update((1.3,), tick, std=0.005)  # it moved, but knows it within 0.5 %
+    assert det.update((1.2,), 12, std=0.005)  # a third update in a row: settled
+    assert det.first_settled == 12
+    # A small vector judged against a scale (an offset against the load's size).
+    det = SettleDetector(1, 1e-4, uncertainty=0.01)
+    assert not det.update((0.01, 0.0), 0, std=0.001)
+    det = SettleDetector(1, 1e-4, uncertainty=0.01)
+    det.update((0.01, 0.0), 0, std=0.001, scale=1.0)
+    assert det.update((0.01, 0.0), 1, std=0.001, scale=1.0)
+
+
+def test_settling_an_iterated_estimate_needs_its_drift_within_its_uncertainty() -> None:
+    det = SettleDetector(5, 1e-4, uncertainty=0.01, iterated=True)
+    x = 1.0
+    for tick in range(50):  # small uncertainty, but it drifts by 10 σ per window
+        x += 0.002
+        assert not det.update((x,), tick, std=0.001)
+    for tick in range(50, 60):
+        det.update((x + 0.0005 * (-1) ** tick,), tick, std=0.001)  # jitter within 3 σ
+    assert det.settled
+    detectors = SettleDetectors.of(5, 1e-4, 0.01)
+    assert [d.iterated for d in _fields(detectors)] == [
+        True,
+        True,
+        True,
+        True,
+        False,
+        False,
+    ]
+
+
+def _fields(detectors: SettleDetectors) -> list[SettleDetector]:
+    return [getattr(detectors, name) for name in detectors.__dataclass_fields__]
+
+
+# ------------------------------------------------------------------------------ configuration
+def test_the_estimator_is_chosen_by_name() -> None:
+    tuning = from_table(AgentTuning, {"estimator": "robust"}, "agent")
+    assert tuning.estimator is Estimators.ROBUST
+    assert AgentTuning().estimator is Estimators.PAPER
+    assert 'estimator = "robust"' in to_toml(tuning)
+    assert from_table(AgentTuning, {"estimator": "robust"}, "agent") == tuning
+    with pytest.raises(ConfigError, match="agent.estimator: expected one of paper, robust"):
+        from_table(AgentTuning, {"estimator": "kalman"}, "agent")
+    with pytest.raises(ConfigError, match="push_force"):
+        AgentTuning(push_force=20.0).validate("agent")
+
+
+class _Own:
+    """What the phase machine reads of a robot's estimates, with a given ω."""
+
+    def __init__(self, omega: float):
+        self.instant = 0
+        self.omega = omega
+        self.measured = 0
+        self.zdot = {}
+        self.centroid = (1.0, 0.5)
+        self.spread = 2.0
+        self.moment = 12.0
+
+
+def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -> None:
+    """Two robots whose ω differ by their noise reverse the torque at the same ticks."""
+    schedules = []
+    for omega in (0.49, 0.51):
+        tuning = AgentTuning(estimator=Estimators.ROBUST, inertia_flip_s=0.5)
+        machine = PhaseMachine(AgentConfig(1, 4, (2,), DT, tuning=tuning))
+        machine.entered[Phase.INERTIA] = 100
+        machine.barrier.phase = Phase.INERTIA
+        machine.inertia_torque, machine.inertia_gain, machine.spin_sign = 2.8, 1.4, 1.0
+        machine._begin(Phase.INERTIA)
+        own = _Own(omega)
+        for k in range(100, 300):
+            machine.force(k, own)
+        torques = [machine._torque[k] for k in range(100, 300)]
+        assert torques[:50] == [2.8] * 50 and torques[50:100] == [-2.8] * 50
+        schedules.append(torques)
+    assert schedules[0] == schedules[1]
