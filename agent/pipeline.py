@@ -186,7 +186,11 @@ class EstimationPipeline:
         d = math.hypot(*z)
         u = (z[0] / d, z[1] / d)
         x = self.consensus.centroid
-        self.settle.centroid.update((x[0] * u[0] + x[1] * u[1], u[0] * x[1] - u[1] * x[0]), e, std)
+        # z_i may be small (a contact near the centroid): judged against the load's size.
+        size = math.sqrt(max(self.consensus.spread, 0.0))
+        self.settle.centroid.update(
+            (x[0] * u[0] + x[1] * u[1], u[0] * x[1] - u[1] * x[0]), e, std, size
+        )
         spread_std = None if std is None else 2.0 * math.hypot(*x) * std
         self.settle.spread.update((self.consensus.spread,), e, spread_std)
 

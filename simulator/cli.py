@@ -560,8 +560,6 @@ def _bench_noise(args: argparse.Namespace) -> int:
         seeds = args.seeds
     if args.plot is not None and not args.sweep:
         raise UsageError("--plot needs --sweep")
-    if args.ideal_drives and args.sweep:
-        raise UsageError("--ideal-drives is for one noise level, not --sweep")
 
     def on_seed(result) -> None:
         state = "done" if result.robust_done else "NOT done"
@@ -571,10 +569,13 @@ def _bench_noise(args: argparse.Namespace) -> int:
             flush=True,
         )
 
+    settings = dataclasses.replace(NoiseSettings(), seeds=seeds)
+    if args.ideal_drives:
+        settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
     if args.sweep:
         found = run_sweep(
             scenarios,
-            seeds,
+            settings,
             lambda sigma, _: print(f"{PROG}: sigma_v {sigma:g} m/s done", file=sys.stderr),
         )
         print(format_sweep(found, label))
@@ -583,9 +584,6 @@ def _bench_noise(args: argparse.Namespace) -> int:
             folder.mkdir(parents=True, exist_ok=True)
             print(f"plot: {plot_sweep(found, folder / 'noise_sweep.png', label)}")
         return 0
-    settings = dataclasses.replace(NoiseSettings(), seeds=seeds)
-    if args.ideal_drives:
-        settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
     results, wall = timed(run_noise_bench, scenarios, settings, on_seed)
     report = format_noise_report(results, settings, label, wall)
     print(report)
@@ -900,8 +898,8 @@ def _add_bench(commands: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--ideal-drives",
         action="store_true",
-        help="with --noise: drives that apply exactly what they are commanded (no lag, no gain"
-        " error)",
+        help="with --noise (and --sweep): drives that apply exactly what they are commanded (no"
+        " lag, no gain error)",
     )
     parser.add_argument(
         "--plot",

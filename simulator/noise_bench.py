@@ -263,18 +263,16 @@ def format_noise_report(
 # ------------------------------------------------------------------------------ the sweep
 def run_sweep(
     scenarios: Callable[[int], Scenario],
-    seeds: int,
+    base: NoiseSettings,
     on_level: Callable[[float, list[SeedResult]], None] | None = None,
     levels: Sequence[float] = SWEEP,
 ) -> dict[float, list[SeedResult]]:
-    """:func:`run_noise_bench` at each ``σ_v`` of ``levels`` (``σ_f = 50 σ_v``, the drives
-    ideal at ``σ_v = 0`` and as in :class:`NoiseSettings` otherwise)."""
+    """:func:`run_noise_bench` with ``base``'s seeds and drives at each ``σ_v`` of ``levels``
+    (``σ_f = 50 σ_v``; the drives ideal at ``σ_v = 0``, where nothing is noisy)."""
     found = {}
     for sigma in levels:
-        drives = NoiseSettings() if sigma else NoiseSettings(time_constant_s=0, gain_error_std=0)
-        settings = dataclasses.replace(
-            drives, velocity_noise=sigma, force_noise=50 * sigma, seeds=seeds
-        )
+        drives = base if sigma else dataclasses.replace(base, time_constant_s=0, gain_error_std=0)
+        settings = dataclasses.replace(drives, velocity_noise=sigma, force_noise=50 * sigma)
         found[sigma] = run_noise_bench(scenarios, settings)
         if on_level is not None:
             on_level(sigma, found[sigma])
@@ -282,7 +280,8 @@ def run_sweep(
 
 
 def format_sweep(found: dict[float, list[SeedResult]], label: str) -> str:
-    """A markdown table: per ``σ_v``, each quantity's median for the three estimators."""
+    """A markdown table: per ``σ_v``, each quantity's median for the three estimators (``-``:
+    some run had no such estimate)."""
     head = "| σ_v (m/s) | σ_f (N) | " + " | ".join(
         f"{name} ({unit}) robust / paper / baseline" for name, _, _, unit in QUANTITIES
     )
@@ -301,8 +300,8 @@ def format_sweep(found: dict[float, list[SeedResult]], label: str) -> str:
 
 
 def plot_sweep(found: dict[float, list[SeedResult]], path: Path, label: str) -> Path:
-    """Error against ``σ_v``, one panel per quantity, log-log (noise-free runs at the left
-    edge, at a tenth of the smallest noise)."""
+    """Error against ``σ_v``, one panel per quantity, log-log (the noise-free runs at the left
+    edge, at a tenth of the smallest noise, which the axis label says)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -321,7 +320,7 @@ def plot_sweep(found: dict[float, list[SeedResult]], path: Path, label: str) -> 
                 ax.plot(*zip(*pts), style, label=which)
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_xlabel("σ_v (m/s), σ_f = 50 σ_v")
+        ax.set_xlabel(f"σ_v (m/s), σ_f = 50 σ_v (σ_v = 0 at {floor:g})")
         ax.set_title(f"{name} ({unit}), median")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend()

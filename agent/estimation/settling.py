@@ -10,7 +10,9 @@ O(size of the estimate) per update.
 An estimate that comes with its standard deviation ``σ`` (the robust estimators' do) is judged
 by it instead: it has settled once, for ``window`` updates running, ``σ`` is at most
 ``uncertainty`` times its size (or times a ``scale`` given with it, for an estimate that may be
-small: an offset measured against the load's size). An estimate that an iteration computes
+small: an offset measured against the load's size), or has stopped shrinking (a small load under
+much noise may never reach the fraction: the team then goes on with what it has, and the
+published ``σ`` says how good that is). An estimate that an iteration computes
 from uncertain inputs (Step 2's consensus: its ``σ`` is its inputs', not how far the iteration
 still has to go) is judged by both: ``σ`` small enough, and no drift beyond ``3σ``.
 
@@ -24,6 +26,9 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+
+PLATEAU = 0.02
+"""An uncertainty that shrank by less than this fraction over a window has stopped shrinking."""
 
 
 class SettleDetector:
@@ -46,6 +51,7 @@ class SettleDetector:
         self.streak = 0
         self.first_settled: int | None = None
         self._past: deque[tuple[float, ...]] = deque(maxlen=self.window + 1)
+        self._stds: deque[float] = deque(maxlen=self.window + 1)
 
     def update(
         self, value: Sequence[float], tick: int, std: float | None = None, scale: float = 0.0
@@ -54,9 +60,11 @@ class SettleDetector:
         it has one, and the ``scale`` its size is at least taken to be); returns whether it is
         settled now."""
         past = self._past
+        if std is not None:
+            self._stds.append(std)
         if std is not None and not (self.iterated and past):
             size = max(math.sqrt(sum(v * v for v in value)), scale)
-            self.streak = self.streak + 1 if std <= self.uncertainty * size else 0
+            self.streak = self.streak + 1 if self._certain(std, size) else 0
         elif past:
             last, oldest = past[-1], past[0]
             size2 = step2 = drift2 = 0.0
@@ -68,13 +76,22 @@ class SettleDetector:
             if std is not None:  # iterated: both its drift and its own uncertainty
                 limit2 = max(limit2, 9.0 * std * std)
             quiet = step2 <= limit2 and drift2 <= limit2
-            if std is not None and std > self.uncertainty * max(math.sqrt(size2), scale):
+            if std is not None and not self._certain(std, max(math.sqrt(size2), scale)):
                 quiet = False
             self.streak = self.streak + 1 if quiet else 0
         past.append(tuple(value))
         if self.settled and self.first_settled is None:
             self.first_settled = tick
         return self.settled
+
+    def _certain(self, std: float, size: float) -> bool:
+        """Certain enough: ``std`` at most ``uncertainty`` times ``size``, or no longer
+        shrinking (by under :data:`PLATEAU` over the window: more data will not make it so;
+        the published uncertainty says how good it is)."""
+        if std <= self.uncertainty * size:
+            return True
+        stds = self._stds
+        return len(stds) > self.window and std >= (1.0 - PLATEAU) * stds[0]
 
     @property
     def settled(self) -> bool:
