@@ -243,8 +243,8 @@ class EstimationPipeline:
             return
         if pushing:
             std = self.com.std if self.robust else None
-            # An offset is judged against the load's size, √(w/n), not its own.
-            self.settle.com_offset.update(ref_offset, e, std, math.sqrt(self.spread))
+            # An offset (perhaps small) is judged against a tenth of the load's size √(w/n).
+            self.settle.com_offset.update(ref_offset, e, std, 0.1 * math.sqrt(self.spread))
         if not (self.settle.com_offset.settled or self.robust) and self.mass_estimator is None:
             return  # (the robust mass fit starts with the push: see MassFit)
         z_c = self.com.com_offset(alpha)

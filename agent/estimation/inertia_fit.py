@@ -17,9 +17,9 @@ sample. Between two instants ``h`` apart with a constant torque ``τ``, ``Φ`` g
 applies.
 
 Uncertainty: ``σ̂² (AᵀA)⁻¹`` of the fit assumes independent residuals; the angle's errors (the
-arc fits' walk) are correlated over a time of order
-:data:`~agent.estimation.least_squares.CORRELATION_TIME`, so the rows count as one per that
-time: the variance is scaled by ``CORRELATION_TIME / Δt``. Then
+arc fits' walk) are correlated, so the rows count as one per
+:data:`~agent.estimation.least_squares.CORRELATION_TIME`: the variance is scaled by
+``CORRELATION_TIME / Δt``. Then
 ``std(Ĵ) = std(p₃) / p₃²``, combined with the relative uncertainty of the torque's scale (``w``,
 from Step 2: ``Ĵ ∝ w``) given at the start.
 """
