@@ -164,8 +164,12 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
     )
     paper = run_inprocess(noisy(scenario, settings, seed, Estimators.PAPER), record_every=1000)
     inside: dict[str, list[bool]] = {key: [] for _, key, _, _ in QUANTITIES}
-    names = {"mass": "mass", "moment": "moment", "contact_to_com": "contact_to_com"}
-    names["relative"] = "relative_positions"
+    names = {  # this module's keys, those of simulator.results.intervals
+        "mass": "mass",
+        "moment": "moment",
+        "contact_to_com": "contact_to_com",
+        "relative": "relative_positions",
+    }
     for i in range(1, scenario.n + 1):
         row = intervals(robust, i)
         if row is None:

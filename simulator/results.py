@@ -35,6 +35,7 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from agent.estimation.estimator import largest_std
 from agent.estimation.geometry import Vec2
 
 if TYPE_CHECKING:
@@ -223,8 +224,7 @@ def _planar_interval(estimate, cov, truth) -> tuple[float | None, bool | None]:
         return None, None
     xx, xy, yy = cov
     det = xx * yy - xy * xy
-    largest = 0.5 * (xx + yy) + math.hypot(0.5 * (xx - yy), xy)
-    half = math.sqrt(PLANAR_95 * max(largest, 0.0))
+    half = math.sqrt(PLANAR_95) * largest_std(xx, xy, yy)
     ex, ey = estimate[0] - truth[0], estimate[1] - truth[1]
     if det <= 0.0:
         return half, ex == 0.0 and ey == 0.0

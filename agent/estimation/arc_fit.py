@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 
-from agent.estimation.estimator import Covariance
+from agent.estimation.estimator import Covariance, largest_std
 from agent.estimation.geometry import Vec2, angle_between
 from agent.estimation.least_squares import LeastSquares, Solution
 
@@ -233,7 +233,7 @@ class ArcRelativePosition:
         if fit is None:
             return None
         (a, b, _), (_, d, _), _ = fit.covariance(self._scale)
-        return math.sqrt(0.5 * (a + d) + math.hypot(0.5 * (a - d), b))
+        return largest_std(a, b, d)
 
     @property
     def distance_std(self) -> float | None:

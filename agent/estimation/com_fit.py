@@ -24,8 +24,7 @@ It does not include the error of ``Ĵ``, which scales ``c`` (``c ∝ J``).
 
 from __future__ import annotations
 
-import math
-
+from agent.estimation.estimator import largest_std
 from agent.estimation.geometry import Vec2, arc_factor, rotate
 from agent.estimation.least_squares import CORRELATION_TIME, LeastSquares, Solution
 
@@ -93,7 +92,7 @@ class ComFit:
         if cov is None:
             return None
         (a, b), (_, d) = cov
-        return math.sqrt(0.5 * (a + d) + math.hypot(0.5 * (a - d), b))
+        return largest_std(a, b, d)
 
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C = R(α) c`` after a rotation ``α``."""
