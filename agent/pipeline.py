@@ -289,8 +289,9 @@ class EstimationPipeline:
                 if self.robust
                 else InertiaEstimator(self.tuning.filter_gain, self.forgetting)
             )
-            for edge in self.edges.values():
-                edge.learning = False  # Step 1 is done: keep the distances, track directions.
+            if not self.robust:  # (the arcs hold in every phase: they learn all along)
+                for edge in self.edges.values():
+                    edge.learning = False  # Step 1 is done: keep the distances, track directions.
         elif phase == Phase.PUSH:
             self.started[5] = k
             self.com = (
@@ -390,17 +391,19 @@ class EstimationPipeline:
             if cov is not None:
                 turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
                 edges[j] = _packed(_turned(cov, turned))
-        out: dict = {"relative_positions_cov": edges}
-        if self.inertia is not None and self.inertia.std is not None:
-            out["moment_std"] = self.inertia.std
-        if self.mass_estimator is not None and self.mass_estimator.std is not None:
-            out["mass_std"] = self.mass_estimator.std
+        moment_std = self.inertia.std if self.inertia is not None else None
+        mass_std = self.mass_estimator.std if self.mass_estimator is not None else None
+        out: dict = {
+            "relative_positions_cov": edges,
+            "moment_std": moment_std,
+            "mass_std": mass_std,
+        }
         com_cov = self.com.covariance if self.com is not None else None
         if contact_to_com is not None and edges and com_cov is not None:
             alpha = self.angle - self.push_angle
             (a, b), (_, d) = _turned(com_cov, alpha)
             c = self.com.com_offset(alpha)
-            moment, moment_std = self.moment, self.inertia.std if self.inertia else None
+            moment = self.moment
             rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
             k = len(edges)
             xx = sum(e[0] for e in edges.values()) / k + a + rel2 * c[0] * c[0]

@@ -6,9 +6,9 @@ The rigid body keeps ``‖z_ij‖`` constant while ``z_ij`` turns with the load 
     s(t) = ∫_{t₀}^{t} ż_ij dt = z_ij(t) − z_ij(t₀),
 
 lies on a circle of radius ``r = ‖z_ij‖`` centred at ``c = −z_ij(t₀)`` (the notes, "Noise"),
-whatever ω does meanwhile, in every phase. The circle is fitted by least squares on the
-algebraic residual ``‖s − c‖² − r²`` (Kåsa's fit), linear in ``p = (c_x, c_y, d)`` with
-``d = r² − ‖c‖²``:
+whatever ω does meanwhile, in every phase (the fit learns all along). The circle is fitted by
+least squares on the algebraic residual ``‖s − c‖² − r²`` (Kåsa's fit), linear in
+``p = (c_x, c_y, d)`` with ``d = r² − ‖c‖²``:
 
     [2 s_x, 2 s_y, 1] p = s_x² + s_y²,
 
@@ -67,8 +67,6 @@ class ArcRelativePosition:
     def __init__(self, forgetting: float = 1.0, min_speed: float = 1e-6):
         self.min_speed = min_speed
         """m/s: a sample with ``‖ż_ij‖`` at most this leaves the arc where it is."""
-        self.learning = True
-        """Kept for the pipeline's sake: the arc holds in every phase, so it always learns."""
         self.moving = False
         """Whether the last sample was used (``‖ż_ij‖ > min_speed``)."""
         self.zdot: Vec2 | None = None
@@ -89,7 +87,6 @@ class ArcRelativePosition:
         """``ż_ij`` at the sample before the last one used."""
         self._second = [0.0, 0.0]
         """The (forgotten) sum of the squared second differences of ``ż_ij``, and its count."""
-        self._forgetting = forgetting
         self._solution: Solution | None = None
         """The fit after the last sample used, once it determines the circle."""
 
@@ -129,7 +126,7 @@ class ArcRelativePosition:
             return
         ex = zdot[0] - 2.0 * self.zdot[0] + before[0]
         ey = zdot[1] - 2.0 * self.zdot[1] + before[1]
-        lam, second = self._forgetting, self._second
+        lam, second = self.fit.forgetting, self._second
         second[0] = lam * second[0] + ex * ex + ey * ey
         second[1] = lam * second[1] + 1.0
 
@@ -238,12 +235,9 @@ class ArcRelativePosition:
     @property
     def distance_std(self) -> float | None:
         """The standard deviation (m) of :attr:`distance`."""
+        r = self.distance
+        if r is None:
+            return None
         fit = self._solution
-        if fit is None:
-            return None
-        cx, cy, d = fit.estimate
-        r2 = d + cx * cx + cy * cy
-        if r2 <= 0.0:
-            return None
-        r = math.sqrt(r2)
+        cx, cy, _ = fit.estimate
         return math.sqrt(fit.variance_of((cx / r, cy / r, 0.5 / r), self._scale))

@@ -26,26 +26,23 @@ from __future__ import annotations
 
 from agent.estimation.estimator import largest_std
 from agent.estimation.geometry import Vec2, arc_factor, rotate
-from agent.estimation.least_squares import CORRELATION_TIME, LeastSquares, Solution
+from agent.estimation.least_squares import RunFit
 
 
-class ComFit:
+class ComFit(RunFit):
     """Least-squares ``z_C`` from the rotation angle while the team pushes with ``f``."""
 
     def __init__(self, n: int, moment: float, force: Vec2, forgetting: float = 1.0):
+        super().__init__(4, forgetting)  # rows [1, t − t₀, Ψ_x, Ψ_y] (θ₀, ω₀, c_x, c_y) = α
         k = n / moment
         self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
         self.started = False
-        self.t = 0.0
         self._alpha = 0.0
         self._phi: Vec2 = self.base
         self._once: Vec2 = (0.0, 0.0)
         """``∫φ`` since the first sample."""
         self._twice: Vec2 = (0.0, 0.0)
         """``Ψ = ∫∫φ`` since the first sample."""
-        self.fit = LeastSquares(4, forgetting)
-        """Rows ``[1, t − t₀, Ψ_x, Ψ_y] (θ₀, ω₀, c_x, c_y) = α``."""
-        self._solution: Solution | None = None
 
     def regressor(self, alpha: float) -> Vec2:
         """``φ = (n/J) R(−α) Qᵀ f``."""
@@ -68,7 +65,7 @@ class ComFit:
         self.started = True
         self._phi, self._alpha = phi, alpha
         self.fit.add((1.0, self.t, *self._twice), alpha)
-        self._solution = self.fit.solve() if self.fit.rows >= 10 else None
+        self._solve()
 
     @property
     def estimate(self) -> Vec2 | None:
@@ -82,7 +79,7 @@ class ComFit:
         fit = self._solution
         if fit is None:
             return None
-        cov = fit.covariance(CORRELATION_TIME * fit.rows / max(self.t, 1e-9))
+        cov = fit.covariance(self._scale)
         return ((cov[2][2], cov[2][3]), (cov[3][2], cov[3][3]))
 
     @property

@@ -77,14 +77,12 @@ of the paper's scenario at 1 cm/s (seeds 0–39): 95 % of the robots' ``Ĵ`` fel
 standard deviations with 0.2 s scaled by 1.3 to 1.6."""
 
 
-class ReciprocalFit:
-    """A fit one of whose parameters, ``p[index]``, is the reciprocal of the estimate (``1/J``,
-    ``1/m``): :attr:`estimate` is ``1/p̂[index]`` once the fit gives it positive, and
-    :attr:`std` its standard deviation with the rows counted as one per
-    :attr:`correlation_time`.
-    Subclasses add rows to :attr:`fit`, advance :attr:`t` and call :meth:`_solve`."""
+class RunFit:
+    """A fit over a run of :attr:`t` seconds whose rows' errors stay correlated for
+    :attr:`correlation_time` (0: each row counts on its own): its covariance is the
+    least-squares one scaled by ``correlation_time × rows / t``. Subclasses add rows to
+    :attr:`fit`, advance :attr:`t` and call :meth:`_solve`."""
 
-    index = 2
     min_rows = 10
     correlation_time = CORRELATION_TIME
     """s: the rows count as one per this time (0: each row counts)."""
@@ -96,9 +94,25 @@ class ReciprocalFit:
         self._solution: Solution | None = None
 
     def _solve(self) -> None:
-        solution = self.fit.solve() if self.fit.rows >= self.min_rows else None
-        positive = solution is not None and solution.estimate[self.index] > 0.0
-        self._solution = solution if positive else None
+        self._solution = self.fit.solve() if self.fit.rows >= self.min_rows else None
+
+    @property
+    def _scale(self) -> float:
+        """The factor on the least-squares covariance (see the class docstring)."""
+        return self.correlation_time * self._solution.rows / max(self.t, 1e-9) or 1.0
+
+
+class ReciprocalFit(RunFit):
+    """A :class:`RunFit` one of whose parameters, ``p[index]``, is the reciprocal of the
+    estimate (``1/J``, ``1/m``): :attr:`estimate` is ``1/p̂[index]`` once the fit gives it
+    positive, and :attr:`std` its standard deviation."""
+
+    index = 2
+
+    def _solve(self) -> None:
+        super()._solve()
+        if self._solution is not None and self._solution.estimate[self.index] <= 0.0:
+            self._solution = None
 
     @property
     def estimate(self) -> float | None:
@@ -110,10 +124,7 @@ class ReciprocalFit:
     def std(self) -> float | None:
         """The standard deviation of :attr:`estimate`."""
         fit = self._solution
-        if fit is None:
-            return None
-        scale = self.correlation_time * fit.rows / max(self.t, 1e-9) or 1.0
-        return fit.reciprocal(self.index, scale)[1]
+        return None if fit is None else fit.reciprocal(self.index, self._scale)[1]
 
     @property
     def covariance(self) -> tuple[tuple[float]] | None:
