@@ -61,7 +61,7 @@ class Agent:
             pipeline.estimate_at(e, inbox, phases)
         if phases.step(k, pipeline, inbox.latest.values()):
             pipeline.enter(phases.phase, k, phases)
-        force = phases.force(k, pipeline)
+        force = phases.force(k, pipeline, measurement.velocity)
         consensus = pipeline.consensus
         barrier = phases.barrier
         share = Share(

@@ -573,6 +573,17 @@ class AgentTuning:
     """N: with ``estimator = "robust"``, every robot pushes with exactly this (at most
     ``max_force``): the robots' Ĵ differ by their noise, and eq. (17)'s ``f̄_y Ĵ/n`` would
     make their forces differ too, where Steps 5 and 7 need one common force."""
+    push_flip_s: float = bounded(1.0, 0, 60, "s", off=0.0, min_ticks=2)
+    """s: the push reverses on the agreed clock so that the load stays on a bounded floor:
+    ``+f`` for half of this, then ``−f`` and ``+f`` for this long each, in turn; the COM's
+    velocity then swings by ``± n f T / 2m`` about the one it had and its travel by
+    ``n f T² / 8m`` (``T`` this). 0 pushes one way, as the paper does (the load's speed then
+    grows without bound)."""
+    brake_gain: float = bounded(2.0, 0, 1000, "N s/m")
+    """N s/m: the damping ``f_i = −b ṗ_Ci`` of Remark V.2 that keeps the floor bounded: added
+    to the spin-up once the kick is over (it takes out the kick's drift; Steps 1–3 need only
+    the turn), and applied alone once the team is done, so that the load comes to rest. 0
+    leaves the load to coast, as the paper does."""
     push_direction: tuple[float, float] = (0.0, 1.0)
     """Direction in ``W`` of the common force ``f`` of Steps 5–7: a vector of length in
     [0.001, 1000] (only its direction counts)."""

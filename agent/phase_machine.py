@@ -7,9 +7,10 @@ own estimates have settled; every robot switches at the same agreed tick:
 phase     forces                                  estimates that settle in it
 ======== ======================================= ===========================================
 excite    kick, then geometry-free spin-up        Step 1 ``z_ij``, Step 2 ``z_i``, Step 3 ω, ``w``
+          and damping
 inertia   ``f_i = ±k z_i⊥`` (eq. 14)                Step 4 ``J``
-push      common ``f`` (eq. 17)                   Step 5 ``z_C``, Step 6 ``ṗ_C``, Step 7 ``m``
-done      zero: the load coasts                   (tracking goes on)
+push      common ``±f`` (eq. 17)                  Step 5 ``z_C``, Step 6 ``ṗ_C``, Step 7 ``m``
+done      damping: the load comes to rest         (tracking goes on)
 halted    zero                                    (a robot was lost: the team stops)
 ======== ======================================= ===========================================
 
@@ -21,7 +22,9 @@ team stops and says so rather than carrying on.
 The force laws:
 
 - *excite*: for ``kick_duration_s`` a seeded random kick, then the spin-up
-  ``f_i = k Σ_j (1 − ‖ż_ij‖/v*) ż_ij`` (:mod:`agent.estimation.excitation`);
+  ``f_i = k Σ_j (1 − ‖ż_ij‖/v*) ż_ij`` (:mod:`agent.estimation.excitation`) plus the damping
+  ``−b ṗ_Ci`` (``brake_gain``, Remark V.2), which takes out the kick's drift: Steps 1–3 need the
+  load to turn, not to travel;
 - *inertia*: ``f_i = ±k z_i⊥`` with ``k = F/√w`` (eq. 14, :mod:`agent.estimation.inertia`): the
   torque ``±k w`` speeds the turn the load already has up until ``|ω|`` reaches
   ``inertia_max_omega``, then brakes it down to half of that, and so on. ``ω`` at the tick is
@@ -31,7 +34,12 @@ The force laws:
   ``inertia_flip_s`` and brakes for as long, in turn, from the agreed tick on;
 - *push*: the common force ``f = max(f̄_y Ĵ/n, push_min_force)`` along ``push_direction``, at
   most ``max_force`` (eq. 17 and Sec. VI, ``f_y = J/n`` for ``f̄_y = 1``); with ``estimator =
-  "robust"`` the configured ``push_force``, the same for every robot whatever its Ĵ.
+  "robust"`` the configured ``push_force``, the same for every robot whatever its Ĵ. The paper
+  pushes one way, and the load's speed grows without bound; on a bounded floor the push
+  reverses on the agreed clock (``push_flip_s = T``): ``+f`` for ``T/2``, then ``−f`` and
+  ``+f`` for ``T`` each, in turn (:meth:`PhaseMachine.push_sign`), so that the COM's velocity
+  swings about the one it had and it travels back and forth;
+- *done*: the damping ``−b ṗ_Ci`` alone brings the load to rest.
 
 Every command is bounded by ``max_force`` (:func:`agent.safety.saturate`).
 """
@@ -113,9 +121,10 @@ class PhaseMachine:
         self.moment_used: float | None = None
         """The ``Ĵ`` the push force was sized with (Steps 5 and 7 use it too)."""
         self.push: Vec2 = (0.0, 0.0)
-        """The common force ``f`` of the push phase (eq. 17)."""
+        """The common force ``f`` of the push phase (eq. 17), before its sign."""
+        self.push_flip_ticks = round(tuning.push_flip_s / self.dt)
         self._ready: Callable[[int, OwnEstimates], bool]
-        self._law: Callable[[int, OwnEstimates], Vec2]
+        self._law: Callable[[int, OwnEstimates, Vec2], Vec2]
         self._begin(Phase.EXCITE)
 
     @property
@@ -186,9 +195,10 @@ class PhaseMachine:
         self.entered.setdefault(Phase.HALTED, tick)
         self._begin(Phase.HALTED)
 
-    def force(self, k: int, own: OwnEstimates) -> Vec2:
-        """The force to apply during tick ``k``, bounded by ``max_force``."""
-        return saturate(self._law(k, own), self.tuning.max_force)
+    def force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
+        """The force to apply during tick ``k``, given the contact's velocity ``ṗ_Ci`` measured
+        at ``t_k``, bounded by ``max_force``."""
+        return saturate(self._law(k, own, velocity), self.tuning.max_force)
 
     # ---------------------------------------------------------------- each phase's laws
     def _begin(self, phase: Phase) -> None:
@@ -197,6 +207,7 @@ class PhaseMachine:
             Phase.EXCITE: (self._excite_ready, self._excite_force),
             Phase.INERTIA: (self._inertia_ready, self._inertia_force),
             Phase.PUSH: (self._push_ready, self._push_force),
+            Phase.DONE: (_never_ready, self._brake_force),
         }
         self._ready, self._law = laws.get(phase, (_never_ready, _no_force))
 
@@ -210,17 +221,24 @@ class PhaseMachine:
             and own.spread > 0.0
         )
 
-    def _excite_force(self, k: int, own: OwnEstimates) -> Vec2:
-        """The kick, then the spin-up."""
+    def _excite_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
+        """The kick, then the spin-up and the damping."""
         if k < self.kick_ticks:
             return self.kick
         t = self.tuning
-        return spin_up_force(t.spin_gain, t.spin_speed, own.zdot.values())
+        spin = spin_up_force(t.spin_gain, t.spin_speed, own.zdot.values())
+        brake = self._brake_force(k, own, velocity)
+        return (spin[0] + brake[0], spin[1] + brake[1])
+
+    def _brake_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
+        """Remark V.2's damping ``−b ṗ_Ci``."""
+        b = self.tuning.brake_gain
+        return (-b * velocity[0], -b * velocity[1])
 
     def _inertia_ready(self, k: int, own: OwnEstimates) -> bool:
         return own.settle.moment.settled and k - self.since >= self.inertia_min_ticks
 
-    def _inertia_force(self, k: int, own: OwnEstimates) -> Vec2:
+    def _inertia_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         """Eq. (14) with the torque's sign for tick ``k`` (records the team's torque)."""
         if self.robust:
             # Speed up, then brake as long, from the agreed tick on: every robot takes the
@@ -245,8 +263,24 @@ class PhaseMachine:
         s = own.settle
         return s.com_offset.settled and s.mass.settled
 
-    def _push_force(self, k: int, own: OwnEstimates) -> Vec2:
-        return self.push
+    def _push_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
+        sign = self.push_sign(k)
+        return (sign * self.push[0], sign * self.push[1])
+
+    def push_sign(self, tick: int) -> float:
+        """The sign of the common force during tick ``tick`` of the push phase: ``+`` for the
+        first ``T/2``, then ``−`` and ``+`` for ``T`` each (``T`` = ``push_flip_s``; always
+        ``+`` for ``T = 0``)."""
+        period = self.push_flip_ticks
+        since = tick - self.entered.get(Phase.PUSH, tick)
+        if period <= 0 or since < period // 2:
+            return 1.0
+        return -1.0 if (since - period // 2) // period % 2 == 0 else 1.0
+
+    def mean_push_sign(self, first: int, last: int) -> float:
+        """The mean sign of the common force over ticks ``first..last − 1`` (Steps 5–7's
+        input over an interval)."""
+        return sum(self.push_sign(t) for t in range(first, last)) / (last - first)
 
     # ---------------------------------------------------------------- for Step 4
     def omega_at(self, tick: int, own: OwnEstimates) -> float:
@@ -274,7 +308,7 @@ def _never_ready(k: int, own: OwnEstimates) -> bool:
     return False
 
 
-def _no_force(k: int, own: OwnEstimates) -> Vec2:
+def _no_force(k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
     return (0.0, 0.0)
 
 

@@ -97,6 +97,8 @@ class EstimationPipeline:
         """The load's rotation angle at the push phase's first instant (Step 5's reference)."""
         self.observer: ComObserver | None = None
         self.mass_estimator: MassEstimator | MassFit | None = None
+        self.lag = 0.0
+        """``τ_d`` (s), the drives' lag from Step 4's fit (robust estimators; Steps 5 and 7)."""
         self.com_velocity: Vec2 | None = None
 
     # ---------------------------------------------------------------- what the phases read
@@ -232,12 +234,13 @@ class EstimationPipeline:
             self.observer = ComObserver(
                 self.n, phases.moment_used, phases.push, self.tuning.observer_gain, omega
             )
-            self._update_com(omega, 0.0, span)  # starts the filters
+            self._update_com(omega, 0.0, 1.0, span)  # starts the filters
             return
         alpha = self.angle - self.push_angle
+        sign = phases.mean_push_sign(prev, e) if pushing else 0.0
         if pushing:
-            self.observer.update(omega, span)
-            self._update_com(omega, alpha, span)
+            self.observer.update(omega, sign, span)
+            self._update_com(omega, alpha, sign, span)
         ref_offset = self.com.estimate
         if ref_offset is None:
             return
@@ -258,26 +261,26 @@ class EstimationPipeline:
             return
         if self.mass_estimator is None:
             self.mass_estimator = (
-                MassFit(self.n, phases.push, self.forgetting)
+                MassFit(self.n, phases.push, self.forgetting, self.lag)
                 if self.robust
                 else MassEstimator(self.tuning.filter_gain, self.n, phases.push, self.forgetting)
             )
             self.started[6] = e
             self.started[7] = e
         if self.robust:
-            self.mass_estimator.update(v_i, offset, self.angle, span)
+            self.mass_estimator.update(v_i, offset, self.angle, sign, span)
         else:
-            self.mass_estimator.update(self.com_velocity, span)
+            self.mass_estimator.update(self.com_velocity, sign, span)
         mass = self.mass_estimator.estimate
         if mass is not None:
             std = self.mass_estimator.std if self.robust else None
             self.settle.mass.update((mass,), e, std)
 
-    def _update_com(self, omega: float, alpha: float, span: float) -> None:
+    def _update_com(self, omega: float, alpha: float, sign: float, span: float) -> None:
         if self.robust:
-            self.com.update(alpha, span)
+            self.com.update(alpha, sign, span)
         else:
-            self.com.update(omega, alpha, span)
+            self.com.update(omega, alpha, sign, span)
 
     # ---------------------------------------------------------------- phases
     def enter(self, phase: Phase, k: int, phases: PhaseMachine) -> None:
@@ -294,8 +297,10 @@ class EstimationPipeline:
                     edge.learning = False  # Step 1 is done: keep the distances, track directions.
         elif phase == Phase.PUSH:
             self.started[5] = k
+            # The drives' lag, which Step 4's fit found, for Steps 5 and 7's.
+            self.lag = self.inertia.lag if self.robust else 0.0
             self.com = (
-                ComFit(self.n, phases.moment_used, phases.push, self.forgetting)
+                ComFit(self.n, phases.moment_used, phases.push, self.forgetting, self.lag)
                 if self.robust
                 else ComRegression(
                     self.tuning.filter_gain,

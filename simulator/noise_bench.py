@@ -68,6 +68,9 @@ class NoiseSettings:
     spin_speed: float = 1.0
     """m/s: Step 1's spin-up target, for both estimators (the scenarios' default is 0.5: a
     faster turn gives the arcs and the angle fits more signal against the same noise)."""
+    spin_gain: float = 10.0
+    """N s/m: the spin-up's gain, for both estimators (the default, 4, holds a turn this fast
+    only well below its target against the damping that keeps the floor bounded)."""
 
 
 @dataclass
@@ -103,7 +106,10 @@ def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Est
         else Actuators(),
         run=dataclasses.replace(scenario.run, seed=seed, max_time_s=settings.max_time_s),
         agent=dataclasses.replace(
-            scenario.agent, estimator=estimator, spin_speed=settings.spin_speed
+            scenario.agent,
+            estimator=estimator,
+            spin_speed=settings.spin_speed,
+            spin_gain=settings.spin_gain,
         ),
     )
 

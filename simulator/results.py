@@ -276,6 +276,25 @@ def step_times(outcome: RunOutcome) -> list[dict[str, Any]]:
     return rows
 
 
+def floor_check(outcome: RunOutcome) -> dict[str, Any]:
+    """The load's excursion over the recorded samples against the scenario's floor: its COM's
+    largest distance from where it started (m), largest speed (m/s) and largest ``|ω|``
+    (rad/s), the limits, and whether all three were kept (``within``)."""
+    floor = outcome.scenario.floor
+    samples = [s.truth for s in outcome.history] or [outcome.final.truth]
+    start = samples[0].com_position
+    travel = max(math.dist(t.com_position, start) for t in samples)
+    speed = max(math.hypot(*t.com_velocity) for t in samples)
+    omega = max(abs(t.omega) for t in samples)
+    return {
+        "travel_m": travel,
+        "speed": speed,
+        "omega": omega,
+        "limits": {"travel_m": floor.travel_m, "speed": floor.speed, "omega": floor.omega},
+        "within": travel <= floor.travel_m and speed <= floor.speed and omega <= floor.omega,
+    }
+
+
 def team_phases(outcome: RunOutcome) -> dict[str, float]:
     """When the team entered each force regime (s), from the run's phase switches."""
     period = outcome.scenario.period_s
@@ -306,6 +325,7 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
         "errors": errors(outcome),
         "intervals": {str(i): intervals(outcome, i) for i in range(1, outcome.scenario.n + 1)},
         "rejections": rejection_counts(outcome.transport.get("rejections")),
+        "floor": floor_check(outcome),
     }
     if "bridges" in outcome.transport:  # a run over CAN: each robot's AGV bridge's counters
         document["bridges"] = outcome.transport["bridges"]
@@ -343,6 +363,7 @@ def failed_results_dict(
         "errors": dict.fromkeys(ERROR_KEYS),
         "intervals": {str(i): None for i in range(1, n + 1)},
         "rejections": rejection_counts(rejections),
+        "floor": None,
     }
 
 
@@ -440,6 +461,7 @@ def format_table(outcome: RunOutcome) -> str:
     regimes = ", ".join(f"{name} {t:.2f} s" for name, t in team_phases(outcome).items())
     lines.append("(start: the first robot began the step; end: the last robot's estimate settled)")
     lines.append(f"team force regimes from: {regimes or '-'}")
+    lines.append(_floor_line(floor_check(outcome)))
     lines += _interval_lines(outcome)
     rejected = _rejections_line(outcome.transport.get("rejections"))
     if rejected:
@@ -448,6 +470,16 @@ def format_table(outcome: RunOutcome) -> str:
     if bridges:
         lines.append(bridges)
     return "\n".join(lines)
+
+
+def _floor_line(floor: dict[str, Any]) -> str:
+    limits = floor["limits"]
+    verdict = "within the floor" if floor["within"] else "LEFT THE FLOOR"
+    return (
+        f"load's largest travel {floor['travel_m']:.2f} m (limit {limits['travel_m']:g}),"
+        f" speed {floor['speed']:.2f} m/s ({limits['speed']:g}),"
+        f" |ω| {floor['omega']:.2f} rad/s ({limits['omega']:g}): {verdict}"
+    )
 
 
 def _interval_lines(outcome: RunOutcome) -> list[str]:

@@ -14,6 +14,7 @@ A scenario is a TOML file (``simulator/scenarios/paper.toml`` is the paper's Sec
     edges = [[1, 2], [2, 3]]  # undirected, connected
     [sensors]
     rate_hz = 100
+    [floor]                   # optional: travel_m = 3.0, speed = 2.0 (m/s), omega = 2.0 (rad/s)
     [run]
     seed = 1
 
@@ -184,6 +185,26 @@ class Actuators:
 
 
 @dataclass(frozen=True)
+class Floor:
+    """The floor the load must stay on: limits on its COM's travel from where it started, its
+    speed and its angular speed. The agents keep to it by their force laws (the damping and the
+    reversing push of :mod:`agent.phase_machine`); each run's results check the truth against it
+    (:func:`simulator.results.floor_check`)."""
+
+    travel_m: float = bounded(3.0, 0, 1000, "m", open_low=True)
+    """m: the COM's largest distance from its starting point."""
+    speed: float = bounded(2.0, 0, 100, "m/s", open_low=True)
+    """m/s: the COM's largest speed."""
+    omega: float = bounded(2.0, 0, 100, "rad/s", open_low=True)
+    """rad/s: the largest angular speed."""
+
+    def validate(self, where: str) -> None:
+        """Raise :class:`ConfigError` naming the key and its range unless every field is in
+        its range."""
+        check_bounds(self, where)
+
+
+@dataclass(frozen=True)
 class RunSettings:
     """How a run is simulated."""
 
@@ -221,6 +242,7 @@ class Scenario:
     agent: AgentTuning = AgentTuning()
     description: str = ""
     actuators: Actuators = Actuators()
+    floor: Floor = Floor()
 
     @property
     def n(self) -> int:
@@ -413,6 +435,7 @@ _TOP_LEVEL: dict[str, str | None] = {
     "graph": "a table",
     "sensors": None,
     "actuators": None,
+    "floor": None,
     "run": None,
     "agent": None,
 }
@@ -625,7 +648,8 @@ def _parse(data: Any) -> Scenario:
             f"actuators.gains: expected one gain per robot ({len(contacts)}),"
             f" got {len(actuators.gains)}"
         )
-    return Scenario(name, body, contacts, edges, sensors, run, agent, description, actuators)
+    floor = from_table(Floor, data.get("floor", {}), "floor")
+    return Scenario(name, body, contacts, edges, sensors, run, agent, description, actuators, floor)
 
 
 def parse_scenario(data: Mapping[str, Any], source: str = "<scenario>") -> Scenario:
@@ -697,6 +721,9 @@ def scenario_to_toml(s: Scenario) -> str:
     actuators = toml_fields(s.actuators, only_changed=True)
     if actuators:
         lines += ["", "[actuators]", *actuators]
+    floor = toml_fields(s.floor, only_changed=True)
+    if floor:
+        lines += ["", "[floor]", *floor]
     lines += ["", "[run]", *toml_fields(s.run)]
     agent = toml_fields(s.agent, only_changed=True)
     if agent:

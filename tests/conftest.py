@@ -90,8 +90,12 @@ def assert_same_estimates(a: RunOutcome, b: RunOutcome, tol: float = 1e-9) -> No
 
 def assert_within(outcome: RunOutcome, rel: float, metres: float) -> None:
     """The run converged within 60 s simulated, every robot's m and J within ``rel`` and its
-    offsets within ``metres`` of the truth."""
+    offsets within ``metres`` of the truth, and the load stayed on the scenario's floor."""
+    from simulator.results import floor_check
+
     assert outcome.converged, f"not converged in {outcome.sim_time_s:.1f} s"
+    floor = floor_check(outcome)
+    assert floor["within"], floor
     assert outcome.sim_time_s < 60.0
     worst = worst_errors(outcome)
     assert worst["mass"] <= rel, worst

@@ -136,7 +136,7 @@ def run_team(machines, owns, ticks, start=0, events=None):
         for i, m in machines.items():
             heard = [sent[j] for j in (i - 1, i + 1) if 1 <= j <= n and j in sent]
             m.step(k, owns[i], heard)
-            forces[i][k] = m.force(k, owns[i])
+            forces[i][k] = m.force(k, owns[i], (0.0, 0.0))
         sent = {i: state(i, k, m) for i, m in machines.items()}
     return forces
 
@@ -198,17 +198,22 @@ def test_a_halt_reaches_the_team_through_its_messages():
 def test_the_kick_is_seeded_of_its_magnitude_and_only_during_kick_duration():
     m = machine(robot=2, seed=7, kick_force=1.5)
     own = Own(zdot={1: (0.0, 0.0), 3: (0.0, 0.0)})
-    forces = [m.force(k, own) for k in range(8)]
+    still = (0.0, 0.0)
+    forces = [m.force(k, own, still) for k in range(8)]
     kick = kick_force(7, 2, 1.5)
     assert forces[:5] == [kick] * 5 and math.hypot(*kick) == pytest.approx(1.5)
-    assert forces[5:] == [(0.0, 0.0)] * 3  # the spin-up, with nothing turning
+    assert forces[5:] == [(0.0, 0.0)] * 3  # the spin-up, with nothing turning or moving
+    # The kick's drift is damped: −b ṗ_Ci after the kick, not during it.
+    assert m.force(4, own, (0.2, -0.1)) == kick
+    b = TUNING.brake_gain
+    assert m.force(5, own, (0.2, -0.1)) == pytest.approx((-0.2 * b, 0.1 * b), rel=1e-12)
     assert machine(robot=2, seed=7, kick_force=1.5).kick == kick
     assert machine(robot=2, seed=8, kick_force=1.5).kick != kick
     assert machine(robot=3, seed=7, kick_force=1.5).kick != kick
     # After the kick, the geometry-free spin-up on the relative velocities.
     own.zdot = {1: (0.1, -0.2), 3: (-0.3, 0.05)}
     expected = spin_up_force(TUNING.spin_gain, TUNING.spin_speed, own.zdot.values())
-    assert m.force(5, own) == expected != (0.0, 0.0)
+    assert m.force(5, own, still) == expected != (0.0, 0.0)
 
 
 def enter(m: PhaseMachine, phase: Phase, k: int, own: Own) -> None:
@@ -230,7 +235,7 @@ def test_inertia_torque_reverses_at_the_limit_and_at_half_of_it(spin):
     expected = [1, 1, -1, -1, -1, 1, 1, -1, 1]  # +1: speed the turn up, −1: brake it
     for k, (speed, direction) in enumerate(zip(script, expected), start=10):
         own.omega, own.instant = spin * speed, k - 1
-        f = m.force(k, own)
+        f = m.force(k, own, (0.3, 0.1))  # (eq. 14 does not damp)
         lead = own.omega * (k + 0.5 - own.instant) * DT
         z = rotate(own.centroid, lead)
         # f = ±k z_i⊥: torque ±k ‖z_i‖² about p_G, signed to speed up (or brake) the turn.
@@ -248,7 +253,7 @@ def test_inertia_torque_reverses_on_the_predicted_omega():
     torque = 2.0 * math.sqrt(1.5)  # k w, applied from tick 11 on
     braking_from = None
     for k in range(11, 40):
-        m.force(k, own)
+        m.force(k, own, (0.0, 0.0))
         assert m.omega_at(k + 1, own) == pytest.approx(
             0.9 + DT / moment * sum(m.mean_torque(t, t + 1) for t in range(10, k + 1))
         )
@@ -271,16 +276,37 @@ def test_push_force(moment, magnitude):
     assert m.moment_used == moment
     for k in range(50, 55):
         own.omega, own.moment = -1.0, 99.0  # later estimates do not change it
-        assert m.force(k, own) == pytest.approx(expected, rel=1e-12)
-    assert math.hypot(*m.force(60, own)) <= 10.0
+        assert m.force(k, own, (1.0, 0.0)) == pytest.approx(expected, rel=1e-12)
+    assert math.hypot(*m.force(60, own, (0.0, 0.0))) <= 10.0
 
 
-def test_done_and_halted_apply_no_force():
+def test_the_push_reverses_on_the_agreed_clock():
+    """``+f`` for ``T/2``, then ``−f`` and ``+f`` for ``T`` each: the COM's velocity swings
+    about the one it had, and its travel stays bounded (``push_flip_s = T``)."""
+    m = machine(push_flip_s=0.1, push_min_force=2.0, push_direction=(0.0, 1.0))
+    own = Own(moment=1.0)
+    enter(m, Phase.PUSH, 50, own)
+    signs = [m.force(k, own, (0.0, 0.0))[1] / 2.0 for k in range(50, 80)]
+    assert signs == [1.0] * 5 + [-1.0] * 10 + [1.0] * 10 + [-1.0] * 5
+    assert [m.push_sign(k) for k in range(50, 80)] == signs
+    assert m.mean_push_sign(53, 57) == 0.0 and m.mean_push_sign(55, 60) == -1.0
+    # The impulse of each whole period is zero: the velocity comes back every T.
+    assert sum(signs[5:25]) == 0.0 and sum(signs[:5]) + sum(signs[25:]) == 0.0
+    one_way = machine(push_flip_s=0.0, push_min_force=2.0)
+    enter(one_way, Phase.PUSH, 50, own)
+    assert {one_way.push_sign(k) for k in range(50, 500)} == {1.0}
+
+
+def test_done_brakes_and_halted_applies_no_force():
     m = machine()
     enter(m, Phase.DONE, 5, Own())
-    assert m.force(5, Own(zdot={2: (1.0, 0.0)})) == (0.0, 0.0)
+    # Remark V.2's damping brings the load to rest.
+    b = TUNING.brake_gain
+    assert m.force(5, Own(zdot={2: (1.0, 0.0)}), (0.5, -0.25)) == (-0.5 * b, 0.25 * b)
+    assert m.force(6, Own(), (0.0, 0.0)) == (0.0, 0.0)
     m.halt(9)
-    assert m.phase is Phase.HALTED and m.since == 9 and m.force(9, Own()) == (0.0, 0.0)
+    assert m.phase is Phase.HALTED and m.since == 9
+    assert m.force(9, Own(), (0.5, 0.5)) == (0.0, 0.0)
     m.halt(12)  # told again: still halted since 9
     assert m.since == 9
 
@@ -399,7 +425,7 @@ def test_a_phase_this_robot_has_no_estimates_for_halts_the_team(phase, own):
     m = machine(robot=2, n=3)
     assert m.step(40, own, [share(1, 39, phase=phase)])
     assert m.phase is Phase.HALTED and m.since == 40
-    assert m.force(40, own) == (0.0, 0.0)
+    assert m.force(40, own, (0.3, 0.0)) == (0.0, 0.0)
 
 
 # ------------------------------------------------------------------------- resend timeout

@@ -723,10 +723,10 @@ def test_mass_estimator(irregular):
     est = MassEstimator(5.0, n, force)
     accel = n * np.array(force) / mass
     times = sample_times(np.random.default_rng(33) if irregular else None, 3.0)
-    est.update(tuple(v0), 0.0)
+    est.update(tuple(v0), 1.0, 0.0)
     assert est.estimate is None
     for t0, t1 in pairwise(times):
-        est.update(tuple(v0 + accel * t1), t1 - t0)
+        est.update(tuple(v0 + accel * t1), 1.0, t1 - t0)
     assert est.estimate == pytest.approx(mass, rel=1e-9)
 
 
@@ -766,11 +766,11 @@ def test_com_regression_recovers_offset():
 
     reg = ComRegression(5.0, n, inertia, f)
     state = [0.0, 1.0]
-    reg.update(state[1], state[0], 0.01)
+    reg.update(state[1], state[0], 1.0, 0.01)
     assert reg.estimate is None and reg.com_offset(0.0) is None
     for _ in range(2000):
         state = rk4(rhs, state, 0.001, 10)
-        reg.update(state[1], state[0], 0.01)
+        reg.update(state[1], state[0], 1.0, 0.01)
     assert np.linalg.norm(np.array(reg.estimate) - c) < 1e-6
     for alpha in (state[0], 0.0, -2.0, 1.3):
         assert np.linalg.norm(np.array(reg.com_offset(alpha)) - rot(alpha) @ c) < 1e-6
@@ -792,7 +792,7 @@ def _observer_run(force, z0, omega0, n, inertia, seconds=40.0):
     out = []
     for k in range(1, round(seconds / 0.01) + 1):
         state = rk4(rhs, state, 0.0005, 20)
-        obs.update(state[2], 0.01)
+        obs.update(state[2], 1.0, 0.01)
         zh = obs.estimate
         e = (state[0] - zh[0], state[1] - zh[1], state[2] - obs.state[2])
         out.append((0.01 * k, 0.5 * (e[0] ** 2 + e[1] ** 2 + e[2] ** 2), math.hypot(*e)))

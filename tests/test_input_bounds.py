@@ -34,6 +34,7 @@ from simulator.scenario import (
     MAX_VERTICES,
     MIN_DIAMETER,
     Actuators,
+    Floor,
     RunSettings,
     Sensors,
     _BodyTable,
@@ -364,6 +365,7 @@ SCENARIO_CASES = [
     *_cases("body", _BodyTable),
     *_cases("sensors", Sensors),
     *_cases("actuators", Actuators),
+    *_cases("floor", Floor),
     *_cases("run", RunSettings),
     *_cases("agent", AgentTuning),
 ]
@@ -548,6 +550,7 @@ def _readme_limits() -> str:
         ("body", _BodyTable),
         ("sensors", Sensors),
         ("actuators", Actuators),
+        ("floor", Floor),
         ("run", RunSettings),
         ("agent", AgentTuning),
         ("robot.toml", AgentNodeConfig),

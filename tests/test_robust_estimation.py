@@ -168,14 +168,14 @@ def test_com_fit_is_exact_without_noise() -> None:
     n, moment, force, c = 4, 12.0, (0.0, 3.0), (-0.12, 0.05)
     theta, omega, fine = 0.0, 0.6, 100
     fit = ComFit(n, moment, force)
-    fit.update(0.0, DT)
+    fit.update(0.0, 1.0, DT)
     for _ in range(300):
         for _ in range(fine):  # the plant, finer than the samples
             zc = rotate(c, theta)
             torque = n * (-zc[1] * force[0] + zc[0] * force[1])
             omega += torque / moment * DT / fine
             theta += omega * DT / fine
-        fit.update(theta, DT)
+        fit.update(theta, 1.0, DT)
     assert math.dist(fit.estimate, c) < 1e-5
     assert math.dist(fit.com_offset(theta), rotate(c, theta)) < 1e-5
     assert fit.std < 1e-3
@@ -193,7 +193,7 @@ def test_mass_fit_is_exact_without_noise() -> None:
         offset = rotate(offset0, angle)  # p_Ci − p_C
         com_velocity = (v0[0] + n * force[0] / mass * t, v0[1] + n * force[1] / mass * t)
         contact_velocity = (com_velocity[0] - 0.8 * offset[1], com_velocity[1] + 0.8 * offset[0])
-        fit.update(contact_velocity, offset, angle, DT)
+        fit.update(contact_velocity, offset, angle, 1.0, DT)
     assert fit.estimate == pytest.approx(mass, rel=1e-4)
     assert fit.std < 1e-3
 
@@ -298,8 +298,67 @@ def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -
         machine._begin(Phase.INERTIA)
         own = _Own(omega)
         for k in range(100, 300):
-            machine.force(k, own)
+            machine.force(k, own, (0.0, 0.0))
         torques = [machine._torque[k] for k in range(100, 300)]
         assert torques[:50] == [2.8] * 50 and torques[50:100] == [-2.8] * 50
         schedules.append(torques)
     assert schedules[0] == schedules[1]
+
+
+# ------------------------------------------------------------------------------ the push reverses
+def _reversing_push(seconds: float, flip_s: float, lag: float = 0.0):
+    """The common force's sign each tick (``+`` for ``T/2``, then ``−``, ``+`` for ``T``
+    each, as :meth:`~agent.phase_machine.PhaseMachine.push_sign`) and the sign each drive
+    applies after its first-order lag ``lag``, averaged over the tick (fine steps)."""
+    period, fine = round(flip_s / DT), 100
+    commanded, applied, level = [], [], 0.0
+    for k in range(round(seconds / DT)):
+        sign = 1.0 if k < period // 2 else (-1.0 if (k - period // 2) // period % 2 == 0 else 1.0)
+        commanded.append(sign)
+        total = 0.0
+        for _ in range(fine):
+            level = sign if lag == 0 else level + (sign - level) * (DT / fine) / lag
+            total += level / fine
+        applied.append(total)
+    return commanded, applied
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.02])
+def test_mass_fit_with_a_reversing_push_and_lagging_drives(lag: float) -> None:
+    """The COM swings back and forth under ``±n f``; the drives' lag (Step 4 finds it) is
+    taken up by ``S − τ_d Σ + τ_d² s``."""
+    n, mass, force, offset0, v0 = 4, 5.0, (0.0, 3.0), (1.2, -0.7), (0.1, -0.2)
+    commanded, applied = _reversing_push(6.0, 1.0, lag)
+    fits = {"modelled": MassFit(n, force, lag=lag), "ignored": MassFit(n, force)}
+    velocity = list(v0)
+    travel = 0.0
+    for k, level in enumerate(applied):
+        angle = 0.8 * k * DT
+        offset = rotate(offset0, angle)
+        contact = (velocity[0] - 0.8 * offset[1], velocity[1] + 0.8 * offset[0])
+        for fit in fits.values():
+            fit.update(contact, offset, angle, commanded[k - 1] if k else 1.0, DT)
+        velocity[1] += n * force[1] * level / mass * DT
+        travel = max(travel, abs(velocity[1] - v0[1]))
+    assert travel < n * force[1] * 1.0 / mass  # the speed swings by at most n f T / 2m each way
+    error = {name: abs(fit.estimate - mass) / mass for name, fit in fits.items()}
+    assert error["modelled"] < (3e-5 if lag == 0 else 1e-3), error
+    if lag:
+        assert error["ignored"] > 5 * error["modelled"], error
+
+
+def test_com_fit_with_a_reversing_push() -> None:
+    """The torque ``n (Q R(α) c)ᵀ f`` reverses with the push: the fit follows the sign."""
+    n, moment, force, c = 4, 12.0, (0.0, 3.0), (-0.12, 0.05)
+    commanded, _ = _reversing_push(3.0, 1.0)
+    theta, omega, fine = 0.0, 0.6, 100
+    fit = ComFit(n, moment, force)
+    fit.update(0.0, 1.0, DT)
+    for sign in commanded:
+        for _ in range(fine):
+            zc = rotate(c, theta)
+            torque = sign * n * (-zc[1] * force[0] + zc[0] * force[1])
+            omega += torque / moment * DT / fine
+            theta += omega * DT / fine
+        fit.update(theta, sign, DT)
+    assert math.dist(fit.estimate, c) < 5e-5

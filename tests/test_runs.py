@@ -8,6 +8,7 @@ tighter aim (0.1 %, 1 mm).
 from __future__ import annotations
 
 import ast
+import dataclasses
 import math
 import random
 
@@ -18,7 +19,9 @@ from hypothesis import strategies as st
 from agent.protocol import Phase, Share
 from agent.transport import InMemoryTransport
 from simulator.generate import generate_scenario
-from simulator.inprocess import RunOutcome, run_inprocess
+from simulator.inprocess import RunOutcome, make_agents, run_inprocess
+from simulator.plant import Plant
+from simulator.results import floor_check
 from simulator.scenario import load_scenario
 from tests.conftest import PAPER, ROOT, assert_within
 
@@ -38,6 +41,45 @@ def test_paper_scenario_passes_every_step_in_order(paper_run: RunOutcome) -> Non
     for est in paper_run.final.estimates.values():
         assert sorted(est.settled) == [1, 2, 3, 4, 5, 6, 7]
         assert est.phase == Phase.DONE
+
+
+def test_the_load_stays_on_a_bounded_floor_as_the_paper_would_not(
+    paper_run: RunOutcome,
+) -> None:
+    """The damping and the reversing push keep the paper's load within 3 m and 2 m/s of where
+    it started; the paper's own excitation (coasting after the kick, pushing one way) does
+    not, and the load comes to rest once the team is done."""
+    floor = floor_check(paper_run)
+    assert floor["within"] and floor["travel_m"] < 1.0 and floor["speed"] < 1.5, floor
+    scenario = paper_run.scenario
+    unbounded = dataclasses.replace(
+        scenario, agent=dataclasses.replace(scenario.agent, brake_gain=0.0, push_flip_s=0.0)
+    )
+    run = run_inprocess(unbounded, record_every=1000)
+    assert run.converged
+    floor = floor_check(run)
+    assert not floor["within"] and floor["travel_m"] > 3.0 and floor["speed"] > 2.0, floor
+
+    # Done: the damping brings the load to rest (the team, stepped on past its end).
+    plant, agents = Plant(scenario), make_agents(scenario)
+    transport = InMemoryTransport(scenario.n, scenario.edges)
+    done_at = None
+    for k in range(3000):
+        shares = []
+        for agent, measurement in zip(agents, plant.measure()):
+            command, share = agent.step(measurement, transport.receive(agent.robot))
+            plant.command(agent.robot, command.force)
+            shares.append(share)
+        for share in shares:
+            transport.send(share)
+        if done_at is None and all(a.phase == Phase.DONE for a in agents):
+            done_at = k
+        if done_at is not None and k - done_at >= 500:
+            break
+        plant.advance()
+    truth = plant.truth()
+    assert done_at is not None and k - done_at == 500
+    assert math.hypot(*truth.com_velocity) < 0.01 and abs(truth.omega) < 0.01, truth
 
 
 def test_the_load_keeps_turning_one_way_during_step_one(paper_run: RunOutcome) -> None:

@@ -1,17 +1,20 @@
 """Step 5 under noise: ``z_C`` from the load's rotation angle while the team pushes.
 
-Under the common force ``f`` (eq. 17) the torque about the COM is ``n (z_C⊥)ᵀ f``, so
-(eq. 18, as in :mod:`agent.estimation.com_regression`) with ``z_C(t) = R(α(t)) c``, ``α`` the
-rotation since the push began and ``c`` the offset then,
+Under the common force ``s(t) f`` (eq. 17; the sign ``s = ±1`` reverses on the agreed clock,
+:meth:`~agent.phase_machine.PhaseMachine.push_sign`) the torque about the COM is
+``n s (z_C⊥)ᵀ f``, so (eq. 18, as in :mod:`agent.estimation.com_regression`) with
+``z_C(t) = R(α(t)) c``, ``α`` the rotation since the push began and ``c`` the offset then,
 
-    θ̈ = φ(t)ᵀ c,      φ(t) = (n/J) R(−α(t)) Qᵀ f.
+    θ̈ = φ(t)ᵀ c,      φ(t) = s(t) (n/J) R(−α(t)) Qᵀ f.
 
 Integrating twice from the push's first instant ``t₀``,
 
     θ(t) = θ₀ + ω₀ (t − t₀) + Ψ(t)ᵀ c,      Ψ(t) = ∫_{t₀}^{t} ∫_{t₀}^{s} φ dr ds,
 
-linear in ``(θ₀, ω₀, c_x, c_y)``: least squares on the angle itself (tracked from the arc
-fits, :mod:`agent.estimation.arc_fit`), never on a differentiated or filtered ω. Over an
+linear in ``(θ₀, ω₀, c_x, c_y)`` (with the drives' lag ``τ_d`` from Step 4,
+``Ψ − τ_d ∫φ + τ_d² φ`` in place of ``Ψ``, as in :mod:`agent.estimation.mass_fit`): least
+squares on the angle itself (tracked from the arc fits, :mod:`agent.estimation.arc_fit`), never
+on a differentiated or filtered ω. Over an
 interval ``h`` the regressor's integrals grow by the trapezoid ``∫φ ≈ h (φ₀ + φ₁)/2`` (made
 exact for a uniform turn by :func:`~agent.estimation.geometry.arc_factor`) and
 ``∫∫φ ≈ h ∫φ(t) + h² (φ₀/3 + φ₁/6)``. ``c`` is determined once the load has turned enough
@@ -32,13 +35,15 @@ from agent.estimation.least_squares import RunFit
 class ComFit(RunFit):
     """Least-squares ``z_C`` from the rotation angle while the team pushes with ``f``."""
 
-    def __init__(self, n: int, moment: float, force: Vec2, forgetting: float = 1.0):
+    def __init__(
+        self, n: int, moment: float, force: Vec2, forgetting: float = 1.0, lag: float = 0.0
+    ):
         super().__init__(4, forgetting)  # rows [1, t − t₀, Ψ_x, Ψ_y] (θ₀, ω₀, c_x, c_y) = α
         k = n / moment
         self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
+        self.lag = lag
         self.started = False
         self._alpha = 0.0
-        self._phi: Vec2 = self.base
         self._once: Vec2 = (0.0, 0.0)
         """``∫φ`` since the first sample."""
         self._twice: Vec2 = (0.0, 0.0)
@@ -48,12 +53,16 @@ class ComFit(RunFit):
         """``φ = (n/J) R(−α) Qᵀ f``."""
         return rotate(self.base, -alpha)
 
-    def update(self, alpha: float, dt: float) -> None:
+    def update(self, alpha: float, sign: float, dt: float) -> None:
         """Feed the rotation ``α`` since the push began, at the end of an interval ``dt``
-        during which the team pushed (the first call, at the push's first instant, starts)."""
-        phi = self.regressor(alpha)
+        during which the team pushed with the mean sign ``sign`` (the first call, at the
+        push's first instant, starts)."""
         if self.started:
-            p0, once, twice = self._phi, self._once, self._twice
+            p0 = self.regressor(self._alpha)
+            phi = self.regressor(alpha)
+            p0 = (sign * p0[0], sign * p0[1])
+            phi = (sign * phi[0], sign * phi[1])
+            once, twice = self._once, self._twice
             h = 0.5 * dt * arc_factor(alpha - self._alpha)
             dd = dt * dt
             self._twice = (
@@ -63,8 +72,11 @@ class ComFit(RunFit):
             self._once = (once[0] + h * (p0[0] + phi[0]), once[1] + h * (p0[1] + phi[1]))
             self.t += dt
         self.started = True
-        self._phi, self._alpha = phi, alpha
-        self.fit.add((1.0, self.t, *self._twice), alpha)
+        self._alpha = alpha
+        (sx, sy), (ox, oy), lag = self._twice, self._once, self.lag
+        px, py = self.regressor(alpha)
+        lag2 = lag * lag * sign
+        self.fit.add((1.0, self.t, sx - lag * ox + lag2 * px, sy - lag * oy + lag2 * py), alpha)
         self._solve()
 
     @property

@@ -41,6 +41,8 @@ class ComObserver:
         """Their x axis (``x⊥ = y``), in ``W``."""
         self.fbar = n * magnitude / moment
         """``f̄_y = (n/J) ‖f‖`` (eq. 19)."""
+        self._fbar = self.fbar
+        """``f̄_y`` with the sign of the current interval."""
         self.gain = gain
         """``k_e``."""
         self.state = [0.0, 0.0, omega]
@@ -50,10 +52,14 @@ class ComObserver:
 
     def _rhs(self, h: list[float], x3: float) -> tuple[float, float, float]:
         e3 = x3 - h[2]
-        return (-h[1] * x3 + self.fbar * e3, h[0] * x3, h[0] * self.fbar + self.gain * e3)
+        fbar = self._fbar
+        return (-h[1] * x3 + fbar * e3, h[0] * x3, h[0] * fbar + self.gain * e3)
 
-    def update(self, omega: float, dt: float) -> None:
-        """Integrate (24) over an interval ``dt`` at whose end ``ω`` was measured."""
+    def update(self, omega: float, sign: float, dt: float) -> None:
+        """Integrate (24) over an interval ``dt`` at whose end ``ω`` was measured, the force's
+        mean sign over it ``sign`` (``f̄_y`` is then ``sign f̄_y``: ``V̇ = −k_e e₃²`` holds for
+        any ``f̄_y(t)``)."""
+        self._fbar = sign * self.fbar
         w0, w1 = self.omega, omega
         wm = 0.5 * (w0 + w1)
         h = self.state

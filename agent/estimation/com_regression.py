@@ -1,6 +1,7 @@
 """Step 5 by least squares: ``z_C`` from the same measurements as observer (24).
 
-Under a common constant force ``f`` (eq. 17), eq. (18) gives ``ω̇ = (n/J) z_C⊥ᵀ f``. The offset
+Under a common force ``f`` (eq. 17), eq. (18) gives ``ω̇ = (n/J) z_C⊥ᵀ f`` (times the force's
+sign ``s = ±1`` when it reverses, which the regressor carries). The offset
 ``z_C`` is constant in the load: ``z_C(t) = R(α(t)) c``, with ``α`` the load's rotation since a
 reference instant (each robot tracks it from its relative positions) and ``c`` the offset at
 that instant. Since ``(Q R c)ᵀ f = cᵀ R(−α) Qᵀ f``,
@@ -41,15 +42,16 @@ class ComRegression:
         """Whether the first sample has started the filters."""
         return self.regression.started
 
-    def update(self, omega: float, alpha: float, dt: float) -> None:
+    def update(self, omega: float, alpha: float, sign: float, dt: float) -> None:
         """Feed ``ω`` and the rotation ``α`` since the reference instant at the end of an
-        interval ``dt`` (the first call, at the reference instant, starts the filters)."""
+        interval ``dt`` over which the force's mean sign was ``sign`` (the first call, at the
+        reference instant, starts the filters)."""
         phi = self.regressor(alpha)
         if not self.regression.started:
             self.regression.start((omega,))
         else:
             # ∫φ dt: trapezoid, made exact for a uniform turn of the load over the interval.
-            h = 0.5 * dt * arc_factor(alpha - self._alpha)
+            h = 0.5 * sign * dt * arc_factor(alpha - self._alpha)
             p0 = self._phi
             self.regression.update((omega,), ((h * (p0[0] + phi[0]), h * (p0[1] + phi[1])),), dt)
         self._phi = phi

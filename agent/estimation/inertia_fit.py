@@ -63,3 +63,10 @@ class InertiaFit(ReciprocalFit):
         if from_fit is None:
             return None
         return math.hypot(from_fit, self.torque_scale_std * self.estimate)
+
+    @property
+    def lag(self) -> float:
+        """``τ_d`` (s): the drives' lag the fit found (``−p₄ / p₃``), 0 until it has one or if it
+        comes out negative (Steps 5 and 7 take it up from here)."""
+        fit = self._solution
+        return 0.0 if fit is None else max(0.0, -fit.estimate[3] / fit.estimate[2])

@@ -1,8 +1,9 @@
 """Step 7: the mass ``m`` (Sec. V-C).
 
-While every robot applies the same force ``f_m``, eq. (1) reads (eq. 25)
+While every robot applies the same force ``f_m`` (its sign may reverse: ``s(t) f_m``, see
+:meth:`~agent.phase_machine.PhaseMachine.push_sign`), eq. (1) reads (eq. 25)
 
-    p̈_C = (n / m) f_m,
+    p̈_C = (n / m) s f_m,
 
 a linear system whose output ``ṗ_C`` each robot knows from eq. (7). ``θ = 1/m`` follows from
 the Appendix's filtered regression with ``y = ṗ_C`` and ``u = n f_m``.
@@ -28,13 +29,15 @@ class MassEstimator:
         """Whether the first sample has started the filters."""
         return self.regression.started
 
-    def update(self, com_velocity: Vec2, dt: float) -> None:
-        """Feed ``ṗ_C`` at the end of an interval ``dt`` (the first call starts the filters)."""
+    def update(self, com_velocity: Vec2, sign: float, dt: float) -> None:
+        """Feed ``ṗ_C`` at the end of an interval ``dt`` over which the force's mean sign was
+        ``sign`` (the first call starts the filters)."""
         if not self.regression.started:
             self.regression.start(com_velocity)
         else:
             fx, fy = self.total_force
-            self.regression.update(com_velocity, ((fx * dt,), (fy * dt,)), dt)
+            u = sign * dt
+            self.regression.update(com_velocity, ((fx * u,), (fy * u,)), dt)
 
     @property
     def estimate(self) -> float | None:

@@ -1,11 +1,17 @@
 """Step 7 under noise: ``m`` from the COM's displacement, not from its velocity.
 
-Under the team's common force ``f`` the COM accelerates at ``n f / m`` (Step 7), so from the
-mass fit's first instant ``t₀``
+Under the team's common force ``s(t) f`` (the sign ``s = ±1`` reverses on the agreed clock to
+keep the floor bounded, :meth:`~agent.phase_machine.PhaseMachine.push_sign`) the COM
+accelerates at ``n s f / m`` (Step 7), so from the mass fit's first instant ``t₀``
 
-    p_C(t) − p_C(t₀) = v₀ (t − t₀) + ½ (n f / m) (t − t₀)²,
+    p_C(t) − p_C(t₀) = v₀ (t − t₀) + (n f / m) (S(t) − τ_d Σ(t) + τ_d² s(t)),
+    Σ(t) = ∫_{t₀}^{t} s dt,   S(t) = ∫_{t₀}^{t} Σ dt,
 
-linear in ``(v₀ₓ, v₀ᵧ, 1/m)`` with one row per axis. A robot measures the displacement without
+linear in ``(v₀ₓ, v₀ᵧ, 1/m)`` with one row per axis; ``τ_d`` is the drives' lag, which
+Step 4's fit found (:attr:`~agent.estimation.inertia_fit.InertiaFit.lag`): a drive with a
+first-order lag applies ``s/(1 + τ_d p)`` (``p`` = d/dt), whose double integral is
+``S − τ_d Σ + τ_d² s/(1 + τ_d p)``; the last term's lag is left out (it only matters for a
+tick after each reversal). A robot measures the displacement without
 differentiating anything: ``p_C = p_Ci − o`` with ``o = p_Ci − p_C = z_i + z_C`` (Steps 2 and
 5), a vector of the load that turns with it, so
 
@@ -34,19 +40,24 @@ class MassFit(ReciprocalFit):
     min_rows = 20  # two rows a sample
     correlation_time = 0.0  # each row counts: measured (below)
 
-    def __init__(self, n: int, force: Vec2, forgetting: float = 1.0):
-        super().__init__(3, forgetting)  # rows [t, 0, ½ n f_x t²], [0, t, ½ n f_y t²]
+    def __init__(self, n: int, force: Vec2, forgetting: float = 1.0, lag: float = 0.0):
+        super().__init__(3, forgetting)  # rows [t, 0, n f_x (S − τ_d Σ)], [0, t, n f_y (…)]
         self.total_force = (n * force[0], n * force[1])
+        self.lag = lag
         self.started = False
+        self._once = 0.0
+        """``Σ = ∫s dt`` since the first sample."""
+        self._twice = 0.0
+        """``S = ∫∫s`` since the first sample."""
         self._velocity: Vec2 = (0.0, 0.0)
         self._travel: Vec2 = (0.0, 0.0)
         """``∫ṗ_Ci dt`` since the first sample."""
         self._angle0 = 0.0
 
-    def update(self, velocity: Vec2, offset: Vec2, angle: float, dt: float) -> None:
+    def update(self, velocity: Vec2, offset: Vec2, angle: float, sign: float, dt: float) -> None:
         """Feed the robot's contact velocity ``ṗ_Ci``, the offset ``o = p_Ci − p_C`` and the
-        load's rotation ``angle`` at the end of an interval ``dt`` of pushing (the first
-        call starts)."""
+        load's rotation ``angle`` at the end of an interval ``dt`` of pushing with the mean
+        sign ``sign`` (the first call starts)."""
         if not self.started:
             self.started = True
             self._velocity, self._angle0 = velocity, angle
@@ -59,11 +70,13 @@ class MassFit(ReciprocalFit):
         )
         self._velocity = velocity
         self.t += dt
+        self._twice += dt * self._once + 0.5 * sign * dt * dt
+        self._once += sign * dt
         back = rotate(offset, self._angle0 - angle)
         dx = self._travel[0] - (offset[0] - back[0])
         dy = self._travel[1] - (offset[1] - back[1])
         t, (fx, fy) = self.t, self.total_force
-        half = 0.5 * t * t
-        self.fit.add((t, 0.0, half * fx), dx)
-        self.fit.add((0.0, t, half * fy), dy)
+        pushed = self._twice - self.lag * self._once + self.lag * self.lag * sign
+        self.fit.add((t, 0.0, pushed * fx), dx)
+        self.fit.add((0.0, t, pushed * fy), dy)
         self._solve()
