@@ -36,7 +36,7 @@ import numpy as np
 from agent.config import Estimators
 from agent.protocol import Measurement
 from simulator.inprocess import RunOutcome, run_inprocess
-from simulator.results import errors, intervals
+from simulator.results import errors, floor_check, intervals
 from simulator.scenario import Actuators, Scenario
 
 DONE_WITHIN_S = 20.0
@@ -71,6 +71,11 @@ class NoiseSettings:
     spin_gain: float = 10.0
     """N s/m: the spin-up's gain, for both estimators (the default, 4, holds a turn this fast
     only well below its target against the damping that keeps the floor bounded)."""
+    push_force: float = 2.0
+    """N: the robust estimators' common push ..."""
+    push_flip_s: float = 2.0
+    """s: ... reversed every this long: against noise, the COM's displacement, ``n f T²/8m``,
+    is the mass's signal; the speed it swings by, ``n f T/2m``, is bounded by the floor."""
 
 
 @dataclass
@@ -86,6 +91,9 @@ class SeedResult:
     paper_done: bool
     inside: dict[str, list[bool]] = field(default_factory=dict)
     """Per quantity, whether the truth was inside each robot's 95 % interval."""
+    floor: dict = field(default_factory=dict)
+    """The robust run's excursion against the scenario's floor
+    (:func:`~simulator.results.floor_check`)."""
 
 
 def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Estimators):
@@ -110,6 +118,8 @@ def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Est
             estimator=estimator,
             spin_speed=settings.spin_speed,
             spin_gain=settings.spin_gain,
+            push_force=settings.push_force,
+            push_flip_s=settings.push_flip_s,
         ),
     )
 
@@ -192,6 +202,7 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
         robust_done=robust.converged,
         paper_done=paper.converged,
         inside=inside,
+        floor=floor_check(robust),
     )
 
 
@@ -258,12 +269,19 @@ def format_noise_report(
     done = sum(r.robust_done and r.robust_time_s <= DONE_WITHIN_S for r in results)
     slowest = max((r.robust_time_s for r in results), default=math.nan)
     ok &= done == n
+    floors = [r.floor for r in results if r.floor]
+    on_floor = sum(f["within"] for f in floors)
+    ok &= on_floor == n
     lines += [
         "",
         f"robust runs done within {DONE_WITHIN_S:g} s simulated: {done}/{n}"
         f" (slowest {slowest:.2f} s); paper runs done: {sum(r.paper_done for r in results)}/{n}",
+        f"robust runs that kept the load on its floor: {on_floor}/{n} (largest travel"
+        f" {max((f['travel_m'] for f in floors), default=math.nan):.2f} m, speed"
+        f" {max((f['speed'] for f in floors), default=math.nan):.2f} m/s, |ω|"
+        f" {max((f['omega'] for f in floors), default=math.nan):.2f} rad/s)",
         f"goals (each median within {RATIO_GOAL:g}x the baseline's, every run done within"
-        f" {DONE_WITHIN_S:g} s, 95 % intervals holding the truth"
+        f" {DONE_WITHIN_S:g} s and on its floor, 95 % intervals holding the truth"
         f" {100 * COVERAGE_GOAL[0]:.0f}-{100 * COVERAGE_GOAL[1]:.0f} % of the time):"
         f" {'met' if ok else 'NOT met'}",
     ]

@@ -277,15 +277,19 @@ def step_times(outcome: RunOutcome) -> list[dict[str, Any]]:
 
 
 def floor_check(outcome: RunOutcome) -> dict[str, Any]:
-    """The load's excursion over the recorded samples against the scenario's floor: its COM's
-    largest distance from where it started (m), largest speed (m/s) and largest ``|ω|``
-    (rad/s), the limits, and whether all three were kept (``within``)."""
+    """The load's excursion against the scenario's floor: its COM's largest distance from
+    where it started (m), largest speed (m/s) and largest ``|ω|`` (rad/s), over every tick in
+    one process (:attr:`RunOutcome.excursion`), else over the recorded samples; the limits,
+    and whether all three were kept (``within``)."""
     floor = outcome.scenario.floor
-    samples = [s.truth for s in outcome.history] or [outcome.final.truth]
-    start = samples[0].com_position
-    travel = max(math.dist(t.com_position, start) for t in samples)
-    speed = max(math.hypot(*t.com_velocity) for t in samples)
-    omega = max(abs(t.omega) for t in samples)
+    if outcome.excursion is not None:
+        travel, speed, omega = (outcome.excursion[k] for k in ("travel_m", "speed", "omega"))
+    else:
+        samples = [s.truth for s in outcome.history] or [outcome.final.truth]
+        start = samples[0].com_position
+        travel = max(math.dist(t.com_position, start) for t in samples)
+        speed = max(math.hypot(*t.com_velocity) for t in samples)
+        omega = max(abs(t.omega) for t in samples)
     return {
         "travel_m": travel,
         "speed": speed,

@@ -22,7 +22,9 @@ from simulator.scenario import load_scenario
 from tests.conftest import PAPER, ROOT
 
 
-def _result(seed: int, scale: float, done: float = 12.0, inside: bool = True) -> SeedResult:
+def _result(
+    seed: int, scale: float, done: float = 12.0, inside: bool = True, travel: float = 0.5
+) -> SeedResult:
     errors = {"mass": 0.001, "moment": 0.004, "contact_to_com": 0.004, "relative": 0.002}
     return SeedResult(
         seed=seed,
@@ -33,6 +35,7 @@ def _result(seed: int, scale: float, done: float = 12.0, inside: bool = True) ->
         robust_done=True,
         paper_done=False,
         inside={k: [inside] * 4 for k in errors},
+        floor={"travel_m": travel, "speed": 1.0, "omega": 1.0, "within": travel <= 3.0},
     )
 
 
@@ -49,6 +52,9 @@ def test_the_report_judges_each_goal() -> None:
     assert format_noise_report(slow, NoiseSettings(), "x", 1.0).endswith("NOT met")
     worse = [_result(s, 2.0, inside=s != 0) for s in range(20)]
     assert format_noise_report(worse, NoiseSettings(), "x", 1.0).endswith("NOT met")
+    off_the_floor = [*good[:-1], _result(19, 1.2, travel=3.5)]
+    report = format_noise_report(off_the_floor, NoiseSettings(), "x", 1.0)
+    assert "on its floor: 19/20 (largest travel 3.50 m" in report and report.endswith("NOT met")
     overconfident = [_result(s, 1.0, inside=s % 2 == 0) for s in range(20)]
     assert format_noise_report(overconfident, NoiseSettings(), "x", 1.0).endswith("NOT met")
 
@@ -71,6 +77,7 @@ def test_one_seed_against_the_centralized_fit() -> None:
     assert result.baseline["relative"] < 0.005 and result.robust["relative"] < 0.01
     assert result.paper["mass"] is None
     assert all(len(flags) == 4 for flags in result.inside.values())
+    assert result.floor["within"], result.floor
 
 
 @pytest.mark.parametrize(
