@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from agent.config import AgentConfig
+from agent.estimation.geometry import Vec2
 from agent.inbox import HISTORY_TICKS, Inbox
 from agent.phase_machine import PhaseMachine
 from agent.pipeline import EstimationPipeline
@@ -37,6 +38,9 @@ class Agent:
         self.inbox = Inbox(self.neighbours)
         self.pipeline = EstimationPipeline(config, self.neighbours)
         self.phase_machine = PhaseMachine(config)
+        self.dt = config.period_s
+        self._commanded: Vec2 | None = None
+        """The force commanded at the last tick."""
 
     @property
     def phase(self) -> Phase:
@@ -56,12 +60,15 @@ class Agent:
         """One sensor tick: returns the force command for this tick and the share to send."""
         k = measurement.tick
         inbox, pipeline, phases = self.inbox, self.pipeline, self.phase_machine
+        if self._commanded is not None:  # the force measured now was applied since the last tick
+            pipeline.drive_gain(self._commanded, measurement.force, self.dt)
         newest = inbox.receive(measurement, shares)
         for e in range(pipeline.instant + 1, newest + 1):
             pipeline.estimate_at(e, inbox, phases)
         if phases.step(k, pipeline, inbox.latest.values()):
             pipeline.enter(phases.phase, k, phases)
         force = phases.force(k, pipeline, measurement.velocity)
+        self._commanded = force
         consensus = pipeline.consensus
         barrier = phases.barrier
         share = Share(
@@ -76,6 +83,9 @@ class Agent:
             switch_at=barrier.switch_at,
             flows=consensus.shared_flows(),
             instant=pipeline.instant,
+            gain=consensus.gain,
+            gain_centroid=consensus.gain_centroid,
+            gain_spread=consensus.gain_spread,
         )
         before = k - HISTORY_TICKS
         inbox.forget(before)

@@ -36,6 +36,7 @@ from agent.estimation.com_fit import ComFit
 from agent.estimation.com_observer import ComObserver
 from agent.estimation.com_regression import ComRegression
 from agent.estimation.com_velocity import com_velocity
+from agent.estimation.drive_gain import DriveGain
 from agent.estimation.geometry import Vec2, rotate
 from agent.estimation.inertia import InertiaEstimator
 from agent.estimation.inertia_fit import InertiaFit
@@ -97,6 +98,8 @@ class EstimationPipeline:
         """The load's rotation angle at the push phase's first instant (Step 5's reference)."""
         self.observer: ComObserver | None = None
         self.mass_estimator: MassEstimator | MassFit | None = None
+        self.drive = DriveGain()
+        """This robot's drive gain (the robust Step 7 scales ``m`` by the team's mean)."""
         self.lag = 0.0
         """``τ_d`` (s), the drives' lag from Step 4's fit (robust estimators; Steps 5 and 7)."""
         self.com_velocity: Vec2 | None = None
@@ -114,10 +117,47 @@ class EstimationPipeline:
 
     @property
     def moment(self) -> float | None:
-        """``Ĵ`` (Step 4)."""
-        return self.inertia.estimate if self.inertia is not None else None
+        """``Ĵ`` (Step 4); the robust fit's scaled by ``q / (w/n)``: the drives applied the
+        torque ``±k n q`` where the fit assumed ``±k w`` (:mod:`agent.estimation.centroid`)."""
+        if self.inertia is None:
+            return None
+        moment = self.inertia.estimate
+        return moment * self._torque_gain if self.robust and moment is not None else moment
+
+    @property
+    def _torque_gain(self) -> float:
+        """``q / (w/n)``: how much more torque the drives applied in Step 4 than commanded."""
+        spread, weighted = self.consensus.spread, self.consensus.gain_spread
+        return weighted / spread if spread > 0.0 and weighted > 0.0 else 1.0
+
+    def com_offset(self, alpha: float) -> Vec2 | None:
+        """``z_C`` after the rotation ``alpha`` since the push began (Step 5); the robust one
+        corrected for the drives' gains. The torque of the push about the COM is
+        ``n (h + ḡ z_C) × f`` (:mod:`agent.estimation.centroid`), so the fit (with the
+        corrected ``Ĵ``) finds ``c' = h + ḡ z_C``, and ``z_C = (c' − h) / ḡ``."""
+        z_c = self.com.com_offset(alpha) if self.com is not None else None
+        if z_c is None or not self.robust:
+            return z_c
+        h, gain = self.consensus.gain_centroid, self.consensus.gain
+        return ((z_c[0] - h[0]) / gain, (z_c[1] - h[1]) / gain)
 
     # ---------------------------------------------------------------- one instant
+    def drive_gain(self, command: Vec2, measured: Vec2, dt: float) -> None:
+        """The force ``measured`` over the last tick, commanded ``command``: this robot's drive
+        gain, the input of the team's mean gain."""
+        self.drive.update(command, measured, dt)
+        self.consensus.gain_input = self.drive.estimate
+
+    @property
+    def mass(self) -> float | None:
+        """``m̂`` (Step 7); the robust fit's scaled by the drives' mean gain ``ḡ``."""
+        if self.mass_estimator is None:
+            return None
+        mass = self.mass_estimator.estimate
+        if mass is None or not self.robust:
+            return mass
+        return mass * self.consensus.gain
+
     def estimate_at(self, e: int, inbox: Inbox, phases: PhaseMachine) -> None:
         """Steps 1–7 at instant ``e`` (the one after :attr:`instant`)."""
         t = e * self.dt
@@ -250,7 +290,7 @@ class EstimationPipeline:
             self.settle.com_offset.update(ref_offset, e, std, 0.1 * math.sqrt(self.spread))
         if not (self.settle.com_offset.settled or self.robust) and self.mass_estimator is None:
             return  # (the robust mass fit starts with the push: see MassFit)
-        z_c = self.com.com_offset(alpha)
+        z_c = self.com_offset(alpha)
         x = self.consensus.centroid
         offset = (x[0] + z_c[0], x[1] + z_c[1])
         v_i = inbox.own_velocity.get(e)
@@ -356,7 +396,7 @@ class EstimationPipeline:
         observed = None
         k_push = phases.entered.get(Phase.PUSH)
         if self.com is not None and k_push is not None and self.instant >= k_push:
-            z_c = self.com.com_offset(self.angle - self.push_angle)
+            z_c = self.com_offset(self.angle - self.push_angle)
             if self.observer is not None:
                 observed = self.observer.estimate
         contact_to_com = None
@@ -376,7 +416,7 @@ class EstimationPipeline:
             com_offset=z_c,
             com_observer=observed,
             com_velocity=self.com_velocity,
-            mass=self.mass_estimator.estimate if self.mass_estimator is not None else None,
+            mass=self.mass,
             contact_to_com=contact_to_com,
             started=dict(self.started),
             settled=self.settle.first_settled(),
@@ -389,15 +429,25 @@ class EstimationPipeline:
         ``Cov(p_C − p_Ci) = Cov(z_i) + Cov(z_C)``, taking the two as independent: ``Cov(z_i)``
         as the mean of the robot's own edges' (the consensus averages edges like them), and
         ``Cov(z_C)`` as the push fit's turned with the load, plus ``c cᵀ (σ_J/J)²`` for the
-        ``Ĵ`` it was computed with (``c ∝ J``)."""
+        ``Ĵ`` it was computed with (``c ∝ J``), plus that of the gains' correction ``h``."""
         edges = {}
         for j in relative:
             cov = self.edges[j].covariance
             if cov is not None:
                 turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
                 edges[j] = _packed(_turned(cov, turned))
+        # The gains' corrections: every robot's gain taken as uncertain as this one's, ``σ_g``;
+        # ḡ and q / (w/n) then have about σ_g / √n relative, and h = Σ g_i z_i / n has
+        # σ_g² w / (2 n²) per axis.
+        gain_std = self.drive.std or 0.0
+        team_gain_std = gain_std / math.sqrt(self.n)
         moment_std = self.inertia.std if self.inertia is not None else None
+        if moment_std is not None:
+            moment = self.moment
+            moment_std = math.hypot(moment_std * self._torque_gain, moment * team_gain_std)
         mass_std = self.mass_estimator.std if self.mass_estimator is not None else None
+        if mass_std is not None:
+            mass_std = math.hypot(mass_std * self.consensus.gain, self.mass * team_gain_std)
         out: dict = {
             "relative_positions_cov": edges,
             "moment_std": moment_std,
@@ -411,9 +461,10 @@ class EstimationPipeline:
             moment = self.moment
             rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
             k = len(edges)
-            xx = sum(e[0] for e in edges.values()) / k + a + rel2 * c[0] * c[0]
+            weighted = gain_std * gain_std * self.spread / (2.0 * self.n)  # σ_g² w / 2n²
+            xx = sum(e[0] for e in edges.values()) / k + a + rel2 * c[0] * c[0] + weighted
             xy = sum(e[1] for e in edges.values()) / k + b + rel2 * c[0] * c[1]
-            yy = sum(e[2] for e in edges.values()) / k + d + rel2 * c[1] * c[1]
+            yy = sum(e[2] for e in edges.values()) / k + d + rel2 * c[1] * c[1] + weighted
             out["contact_to_com_cov"] = (xx, xy, yy)
         return out
 

@@ -99,8 +99,11 @@ class Share:
     - ``degree``: the sender's number of neighbours (Metropolis consensus weights).
     - ``centroid``: the sender's centroid iterate ``x_i`` (Aragues et al. [10]) or ``None``.
     - ``spread``: the sender's average-consensus state ``ξ_i`` for ``w = Σ‖z_i‖²`` (eq. 16).
-    - ``flows``: ``(j, F_x, F_y, F_s)`` per neighbour ``j``: the sender's outflows of both
-      iterations on edge ``(sender, j)`` (see :mod:`agent.estimation.flows`).
+    - ``gain``, ``gain_centroid``, ``gain_spread``: the sender's average-consensus states for
+      the drives' gains: their mean ``ḡ``, ``Σ g_i z_i / n`` (in ``W`` at ``instant``) and
+      ``Σ g_i ‖z_i‖² / n`` (see :mod:`agent.estimation.centroid`).
+    - ``flows``: ``(j, F_x, F_y, F_s, F_g, F_hx, F_hy, F_q)`` per neighbour ``j``: the sender's
+      outflows of the iterations on edge ``(sender, j)`` (see :mod:`agent.estimation.flows`).
     - ``phase``, ``ready``, ``switch_at``: the team's phase barrier (see
       :mod:`agent.coordination`): the sender's phase, the bitmask of robots known to be ready
       to leave it, and the agreed tick of the switch (``-1`` while none is agreed).
@@ -115,8 +118,11 @@ class Share:
     phase: Phase = Phase.EXCITE
     ready: int = 0
     switch_at: int = -1
-    flows: tuple[tuple[int, float, float, float], ...] = ()
+    flows: tuple[tuple[int, float, float, float, float, float, float, float], ...] = ()
     instant: int = -1
+    gain: float = 1.0
+    gain_centroid: Vec2 = (0.0, 0.0)
+    gain_spread: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -419,7 +425,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 3
+WIRE_VERSION = 4
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -430,8 +436,10 @@ class DecodeError(ValueError):
 
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct("<Hq2dHB2ddBQqqB")
-_FLOW = _struct.Struct("<H3d")
+_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqB")
+_FLOW = _struct.Struct("<H7d")
+_FLOW_FIELDS = 8
+"""A flow: the neighbour, then :data:`agent.estimation.flows.Flow`'s seven numbers."""
 _CLOCK = _struct.Struct("<qd")
 _ESTIMATES = _struct.Struct("<HqBqHBBBB")
 """robot, tick, phase, phase_since, which optional values follow (bit per
@@ -508,6 +516,9 @@ def encode(message: object) -> bytes:
             cx,
             cy,
             m.spread,
+            m.gain,
+            *m.gain_centroid,
+            m.gain_spread,
             m.phase,
             m.ready,
             m.switch_at,
@@ -688,7 +699,9 @@ MAX_FORCE = 10_000.0
 MAX_DISTANCE = 10_000.0
 """m, a position or offset shared between agents."""
 MAX_FLOW = 1e9
-"""What has flowed on an edge of the consensus iterations (m and m²)."""
+"""What has flowed on an edge of the consensus iterations (m, m² and gains)."""
+MAX_GAIN = 100.0
+"""A drive's gain, or the team's mean gain as a consensus state."""
 
 
 def _within(name: str, value: float, low: float, high: float) -> None:
@@ -730,10 +743,19 @@ def _share(m: Share) -> None:
     _within("share.switch_at", m.switch_at, -1, MAX_TICK)
     _within("share.instant", m.instant, -1, m.tick - 1)
     _within("share.flows (how many)", len(m.flows), 0, m.degree)
-    for j, fx, fy, fs in m.flows:
+    _within("share.gain", m.gain, -MAX_GAIN, MAX_GAIN)
+    _bounded("share.gain_centroid", m.gain_centroid, MAX_GAIN * MAX_DISTANCE)
+    _within(
+        "share.gain_spread", m.gain_spread, -MAX_GAIN * MAX_DISTANCE**2, MAX_GAIN * MAX_DISTANCE**2
+    )
+    for flow in m.flows:
+        if len(flow) != _FLOW_FIELDS:
+            raise DecodeError(f"share.flows: expected {_FLOW_FIELDS} numbers a flow, got {flow!r}")
+        j, fx, fy, *scalars = flow
         _robot_id("share.flows.robot", j)
         _bounded("share.flows", (fx, fy), MAX_FLOW)
-        _within("share.flows", fs, -MAX_FLOW, MAX_FLOW)
+        for f in scalars:
+            _within("share.flows", f, -MAX_FLOW, MAX_FLOW)
 
 
 def _clock(m: Clock) -> None:
@@ -865,9 +887,9 @@ def _decode(kind: type, payload: bytes):
         return Command(r, t, (fx, fy))
     if kind is Share:
         fixed = body[: _SHARE.size]
-        s, t, vx, vy, deg, has, cx, cy, spread, phase, ready, switch_at, instant, count = _unpack(
-            _SHARE, fixed, "share"
-        )
+        values = _unpack(_SHARE, fixed, "share")
+        s, t, vx, vy, deg, has, cx, cy, spread, gain, hx, hy, q = values[:13]
+        phase, ready, switch_at, instant, count = values[13:]
         rest = body[_SHARE.size :]
         if len(rest) != count * _FLOW.size:
             raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
@@ -887,6 +909,9 @@ def _decode(kind: type, payload: bytes):
             switch_at,
             flows,
             instant,
+            gain,
+            (hx, hy),
+            q,
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))

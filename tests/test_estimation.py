@@ -482,16 +482,21 @@ def message(i: int, t: int, c: CentroidConsensus) -> Share:
         spread=c.spread,
         flows=c.shared_flows(),
         instant=t,
+        gain=c.gain,
+        gain_centroid=c.gain_centroid,
+        gain_spread=c.gain_spread,
     )
 
 
-def run_consensus(p, edges, rounds, turn=0.0, lost=frozenset()):
+def run_consensus(p, edges, rounds, turn=0.0, lost=frozenset(), gains=None):
     """The team's iterations: at instant ``t`` each robot hears its neighbours' messages of
     ``t − 1``, except ``(t, sender, receiver)`` in ``lost`` (it keeps the older one it has).
     Yields the team after each instant."""
     n = len(p)
     nb = neighbours_of(n, edges)
     team = {i: CentroidConsensus(i, sorted(nb[i])) for i in range(n)}
+    for i, c in team.items():
+        c.gain_input = 1.0 if gains is None else gains[i]
     frames = {i: TurningLoad(p, i, turn) for i in range(n)}
     heard = {i: {} for i in range(n)}
     sent = {}
@@ -528,6 +533,28 @@ def test_centroid_consensus_converges_to_offsets_and_w(kind, turn):
     for c in team.values():
         assert c.estimate[0] == c.centroid and c.covariance is None
         assert c.spread == pytest.approx(w / n, abs=1e-9)
+
+
+@pytest.mark.parametrize("lossy", [False, True])
+def test_the_drives_gains_averages(lossy):
+    """Beside ``z_i`` and ``w``: the mean gain ``ḡ``, ``h = Σ g_i z_i / n`` (turning with the
+    load) and ``q = Σ g_i ‖z_i‖² / n``, whatever messages are lost."""
+    n, turn, rounds = 6, 0.01, 3000
+    p = np.random.default_rng(5).uniform(-3, 3, size=(n, 2))
+    gains = np.random.default_rng(6).normal(1.0, 0.05, size=n)
+    edges = graph("ring", n)
+    lost = _lossy(n, edges, rounds, 0.2, 7) if lossy else frozenset()
+    for team in run_consensus(p, edges, rounds, turn, lost, gains):
+        gamma = [c.gain for c in team.values()]
+        assert sum(gamma) == pytest.approx(float(gains.sum()), abs=1e-9) or lossy
+    z = offsets(p, turn, rounds - 1)
+    h = (gains[:, None] * z).sum(axis=0) / n
+    q = float((gains * (z**2).sum(axis=1)).sum()) / n
+    for c in team.values():
+        assert c.gain == pytest.approx(float(gains.mean()), abs=1e-9)
+        assert c.gain_centroid == pytest.approx(tuple(h), abs=1e-9)
+        assert c.gain_spread == pytest.approx(q, abs=1e-9)
+    assert np.linalg.norm(h) > 0.01  # not the unweighted centroid's zero
 
 
 def _lossy(n, edges, rounds, probability, seed):
@@ -623,7 +650,7 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
         velocity=(0, 0),
         degree=1,
         spread=2.0,
-        flows=((0, 0.5, -1.0, 0.25),),
+        flows=((0, 0.5, -1.0, 0.25, 0.0, 0.0, 0.0, 0.0),),
         instant=t - 2,
     )
     c.update(phi, {1: theirs}, frame, 0.01)
@@ -641,7 +668,7 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
     assert c.spread == pytest.approx(x @ x + 0.25 + ds1 + ds2, abs=1e-12)
     ((j, *flow),) = c.shared_flows()
     assert j == 1
-    assert flow == pytest.approx([-x[0], -x[1], -0.25 - ds1 - ds2], abs=1e-12)
+    assert flow[:3] == pytest.approx([-x[0], -x[1], -0.25 - ds1 - ds2], abs=1e-12)
 
 
 def test_every_estimator_has_the_common_shape():

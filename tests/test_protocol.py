@@ -99,7 +99,10 @@ SHARE_FLOWS = Share(
     phase=1,
     ready=2**64 - 1,
     switch_at=-1,
-    flows=((2, 0.5, -0.25, 1.0), (4, -3.0, 2.0, 0.0)),
+    flows=((2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3), (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3)),
+    gain=1.02,
+    gain_centroid=(0.04, -0.01),
+    gain_spread=2.5,
 )
 CLOCK = Clock(tick=42, time_s=0.42)
 ESTIMATES_EMPTY = Estimates(robot=1, tick=0, phase=Phase.EXCITE)
@@ -232,7 +235,7 @@ def test_phases_travel_by_name_in_json_and_by_number_in_shares() -> None:
 @pytest.mark.parametrize("phase", [5, 6, 200, 255])
 def test_a_share_with_no_such_phase_is_refused(phase: int) -> None:
     payload = bytearray(encode(SHARE_CENTROID))
-    at = 3 + struct.calcsize("<Hq2dHB2dd")  # the phase byte
+    at = 3 + struct.calcsize("<Hq2dHB2ddd2dd")  # the phase byte
     assert payload[at] == Phase.PUSH
     payload[at] = phase
     assert "phase" in str(rejects(Share, bytes(payload)))
@@ -283,7 +286,10 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         phase=st.sampled_from(Phase),
         ready=st.integers(0, 2**64 - 1),
         switch_at=ticks,
-        flows=st.lists(st.tuples(ids, numbers, numbers, numbers), max_size=8).map(tuple),
+        flows=st.lists(st.tuples(ids, *[numbers] * 7), max_size=8).map(tuple),
+        gain=st.floats(-100.0, 100.0),
+        gain_centroid=pairs,
+        gain_spread=numbers,
         instant=ticks,
     )
     maybe = lambda strategy: st.none() | strategy  # noqa: E731
@@ -366,8 +372,9 @@ DOMAIN_CASES = {
     "share degree 0": Share(sender=2, tick=3, velocity=(0.0, 0.0), degree=0),
     "share instant not before its tick": Share(2, 3, (0.0, 0.0), 1, instant=3),
     "share switch below -1": Share(2, 3, (0.0, 0.0), 1, switch_at=-7),
+    "share mean gain of 1000": Share(2, 3, (0.0, 0.0), 1, gain=1000.0),
     "share with more flows than neighbours": Share(
-        2, 3, (0.0, 0.0), 1, flows=((1, 0.0, 0.0, 0.0), (3, 0.0, 0.0, 0.0))
+        2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * 7), (3, *[0.0] * 7))
     ),
     "share centroid 1e5 m away": Share(2, 3, (0.0, 0.0), 1, centroid=(1e5, 0.0)),
 }
@@ -491,8 +498,10 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
         _with(SHARE_PLAIN, velocity=(bad, 0.0)),
         _with(SHARE_PLAIN, spread=bad),
         _with(SHARE_CENTROID, centroid=(0.0, bad)),
-        _with(SHARE_FLOWS, flows=((2, 0.5, bad, 1.0),)),
-        _with(SHARE_FLOWS, flows=((2, 0.5, 0.5, 1.0), (4, 0.0, 0.0, bad))),
+        _with(SHARE_FLOWS, flows=((2, 0.5, bad, 1.0, 0.0, 0.0, 0.0, 0.0),)),
+        _with(SHARE_FLOWS, flows=((2, *[0.5] * 7), (4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, bad))),
+        _with(SHARE_FLOWS, gain=bad),
+        _with(SHARE_FLOWS, gain_centroid=(0.0, bad)),
         _with(ESTIMATES_FULL, mass=bad),
         _with(ESTIMATES_FULL, contact_to_com=(0.0, bad)),
         _with(ESTIMATES_PARTIAL, omega=bad),
@@ -506,8 +515,8 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
 
 
 def test_share_flow_count_must_match_its_bytes() -> None:
-    payload = encode(SHARE_FLOWS)  # two flows of 26 bytes each, the count in the last fixed byte
-    flow = struct.calcsize("<H3d")
+    payload = encode(SHARE_FLOWS)  # two flows of 58 bytes each, the count in the last fixed byte
+    flow = struct.calcsize("<H7d")
     fixed = len(payload) - 2 * flow
     assert payload[fixed - 1] == 2
     rejects(Share, payload[:-flow])  # one flow's bytes, count 2

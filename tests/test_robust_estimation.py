@@ -13,6 +13,7 @@ import pytest
 from agent.config import AgentConfig, AgentTuning, ConfigError, Estimators, from_table, to_toml
 from agent.estimation.arc_fit import ArcRelativePosition
 from agent.estimation.com_fit import ComFit
+from agent.estimation.drive_gain import DriveGain
 from agent.estimation.estimator import Estimator
 from agent.estimation.geometry import rotate
 from agent.estimation.inertia_fit import InertiaFit
@@ -362,3 +363,44 @@ def test_com_fit_with_a_reversing_push() -> None:
             theta += omega * DT / fine
         fit.update(theta, sign, DT)
     assert math.dist(fit.estimate, c) < 5e-5
+
+
+# ------------------------------------------------------------------------------ drive gain
+def _drive(gain: float, lag: float, ticks: int, noise: float, seed: int = 3):
+    """Commands that change every tick (as the spin-up's do), through a drive of ``gain``
+    and first-order ``lag`` integrated finely; each tick's mean force plus white noise."""
+    rng = np.random.default_rng(seed)
+    fine, force = 50, np.zeros(2)
+    command = np.array([2.0, -1.0])
+    rows = []
+    for _ in range(ticks):
+        command = command + rng.normal(0.0, 0.3, 2) if rng.random() > 0.02 else -command
+        total = np.zeros(2)
+        for _ in range(fine):
+            target = gain * command
+            force = target if lag == 0 else force + (target - force) * (DT / fine) / lag
+            total += force / fine
+        rows.append((tuple(command), tuple(total + rng.normal(0.0, noise, 2))))
+    return rows
+
+
+@pytest.mark.parametrize("lag", [0.0, 0.02, 0.05])
+def test_drive_gain_through_a_lagging_drive(lag: float) -> None:
+    """The commands change every tick, so the lag must be modelled exactly: the lag of the
+    grid whose residual is least gives the gain."""
+    drive = DriveGain()
+    assert drive.estimate == 1.0 and drive.std is None  # an ideal drive until measured
+    for command, measured in _drive(1.03, lag, 1000, 0.0):
+        drive.update(command, measured, DT)
+    assert drive.estimate == pytest.approx(1.03, rel=2e-3)
+
+
+def test_drive_gain_under_force_noise_and_its_uncertainty() -> None:
+    errors = []
+    for seed in range(20):
+        drive = DriveGain()
+        for command, measured in _drive(0.97, 0.02, 1500, 0.5, seed):
+            drive.update(command, measured, DT)
+        errors.append((drive.estimate - 0.97) / drive.std)
+    # The published standard deviation is honest: the errors are about one of it.
+    assert 0.5 < float(np.std(errors)) < 1.5 and abs(float(np.mean(errors))) < 1.0

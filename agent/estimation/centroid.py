@@ -1,5 +1,10 @@
 """Step 2: each contact's offset from the contacts' centroid, ``z_i = p_Ci − p_G``, with the
-average consensus (16) for Step 4's ``w = Σ_i ‖z_i‖²`` beside it.
+average consensus (16) for Step 4's ``w = Σ_i ‖z_i‖²`` beside it, and the same for the drives'
+gains (each robot's :class:`~agent.estimation.drive_gain.DriveGain`): their mean ``ḡ``, the
+weighted mean offset ``h = Σ g_i z_i / n`` (a vector of the load, turned with it like ``x_i``)
+and ``q = Σ g_i ‖z_i‖² / n``. Steps 4, 5 and 7 assumed every robot applies its command; with
+gains, the team's torque in Step 4 is ``±k n q`` (not ``±k w``), its force in Steps 5–7 is
+``n ḡ f`` and the torque of that force about the COM is ``n (h + ḡ z_C) × f``.
 
 Aragues et al. [10]: from ``x_i = 0`` iterate
 
@@ -70,27 +75,43 @@ class CentroidConsensus:
         """``x_i``, in ``W`` at the last update's instant."""
         self.spread = 0.0
         """``ξ_i``."""
+        self.gain = 1.0
+        """``γ_i`` → ``ḡ``, the drives' mean gain."""
+        self.gain_centroid: Vec2 = (0.0, 0.0)
+        """``η_i`` → ``Σ g_j z_j / n``, in ``W`` at the last update's instant."""
+        self.gain_spread = 0.0
+        """``κ_i`` → ``Σ g_j ‖z_j‖² / n``."""
+        self.gain_input = 1.0
+        """This robot's drive gain, the input of ``γ``'s consensus."""
         self._adopted: dict[int, int] = {}
         """The tick of the message of each neighbour ``j`` whose ``F_ji`` was adopted last."""
 
     def update(self, turn: float, shares: Mapping[int, Share], frame: LoadFrame, dt: float) -> None:
         """One iteration at ``frame.instant``, ``turn`` (rad) after the previous one, on the
         neighbours' latest messages ``shares`` (by sender; their ``centroid`` is ``x_j``,
-        ``spread`` is ``ξ_j``, ``flows`` hold ``F_ji``). The iteration advances one step per
-        update whatever ``dt``."""
+        ``spread`` is ``ξ_j``, ``gain``, ``gain_centroid`` and ``gain_spread`` the gain
+        averages' states, ``flows`` hold ``F_ji``). The iteration advances one step per update
+        whatever ``dt``."""
         flows = self.flows
         flows.turn(turn)
         adopted = self._adopted
         for j, s in shares.items():
             if adopted.get(j) != s.tick:  # a message not heard before: F_ij = −F_ji
                 adopted[j] = s.tick
-                for k, fx, fy, fs in s.flows:
+                for k, fx, fy, fs, fg, fhx, fhy, fq in s.flows:
                     if k == self.robot:
-                        vx, vy = rotate((fx, fy), frame.turned_since(s.instant))
-                        flows.adopt(j, (vx, vy, fs))
-        fx, fy, fs = flows.outflow()
+                        since = frame.turned_since(s.instant)
+                        vx, vy = rotate((fx, fy), since)
+                        hx, hy = rotate((fhx, fhy), since)
+                        flows.adopt(j, (vx, vy, fs, fg, hx, hy, fq))
+        fx, fy, fs, fg, fhx, fhy, fq = flows.outflow()
         x = (-fx, -fy)
-        xi = x[0] * x[0] + x[1] * x[1] - fs
+        g = self.gain_input
+        norm2 = x[0] * x[0] + x[1] * x[1]
+        xi = norm2 - fs
+        gamma = g - fg
+        eta = (g * x[0] - fhx, g * x[1] - fhy)
+        kappa = g * norm2 - fq
         previous = frame.instant - 1
         for j in self.neighbours:
             s = shares.get(j)
@@ -102,16 +123,33 @@ class CentroidConsensus:
                 # Usually one tick old: turned by this update's turn, already applied to the flows.
                 if s.instant == previous:
                     x_j = flows.turned(s.centroid)
+                    eta_j = flows.turned(s.gain_centroid)
                 else:
-                    x_j = rotate(s.centroid, frame.turned_since(s.instant))
+                    since = frame.turned_since(s.instant)
+                    x_j = rotate(s.centroid, since)
+                    eta_j = rotate(s.gain_centroid, since)
                 dx, dy = centroid_term(a, x, x_j, frame.relative_position(j) or (0.0, 0.0))
-            ds = consensus_term(a, xi, s.spread)
-            flows.push(j, dx, dy, ds)
-            fx -= dx
-            fy -= dy
-            fs -= ds
+            else:
+                eta_j = eta
+            delta = (
+                dx,
+                dy,
+                consensus_term(a, xi, s.spread),
+                consensus_term(a, gamma, s.gain),
+                consensus_term(a, eta[0], eta_j[0]),
+                consensus_term(a, eta[1], eta_j[1]),
+                consensus_term(a, kappa, s.gain_spread),
+            )
+            flows.push(j, delta)
+            fx, fy, fs, fg, fhx, fhy, fq = (
+                f - d for f, d in zip((fx, fy, fs, fg, fhx, fhy, fq), delta)
+            )
         self.centroid = (-fx, -fy)
-        self.spread = fx * fx + fy * fy - fs
+        norm2 = fx * fx + fy * fy
+        self.spread = norm2 - fs
+        self.gain = g - fg
+        self.gain_centroid = (-g * fx - fhx, -g * fy - fhy)
+        self.gain_spread = g * norm2 - fq
 
     @property
     def estimate(self) -> tuple[Vec2, float]:
@@ -123,6 +161,9 @@ class CentroidConsensus:
         """Not estimated yet."""
         return None
 
-    def shared_flows(self) -> tuple[tuple[int, float, float, float], ...]:
-        """``(j, F_x, F_y, F_s)`` per neighbour ``j``: the flows a message carries."""
+    def shared_flows(
+        self,
+    ) -> tuple[tuple[int, float, float, float, float, float, float, float], ...]:
+        """``(j, F_x, F_y, F_s, F_g, F_hx, F_hy, F_q)`` per neighbour ``j``: the flows a message
+        carries."""
         return tuple((j, *f) for j, f in self.flows.flows.items())

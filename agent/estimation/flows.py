@@ -14,8 +14,10 @@ hearing from ``j`` takes ``F_ij = −F_ji``. The flows of an edge are then antis
 whatever was lost, so the sum holds: the iteration converges to the same point as without loss.
 Without loss the adopted flows equal one's own, and it is exactly the original iteration.
 
-Flows are ``(x, y, s)``: a 2-vector for the centroid (in ``W`` at the robot's current instant,
-turned with the load like the iterates) and a scalar for ``w``.
+Flows are ``(x, y, s, g, hx, hy, q)``: a 2-vector for the centroid (in ``W`` at the robot's
+current instant, turned with the load like the iterates), a scalar for ``w``, one for the
+drives' mean gain ``ḡ``, a 2-vector (turned likewise) for the gain-weighted centroid offsets'
+mean ``Σ g_i z_i / n`` and a scalar for ``Σ g_i ‖z_i‖² / n``.
 """
 
 from __future__ import annotations
@@ -23,22 +25,31 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-Flow = tuple[float, float, float]
+Flow = tuple[float, float, float, float, float, float, float]
+ZERO: Flow = (0.0,) * 7
 
 
 class EdgeFlows:
     """One robot's outflows to each neighbour."""
 
     def __init__(self, neighbours: Iterable[int]):
-        self.flows: dict[int, Flow] = {j: (0.0, 0.0, 0.0) for j in neighbours}
+        self.flows: dict[int, Flow] = dict.fromkeys(neighbours, ZERO)
         self._c, self._s = 1.0, 0.0
 
     def turn(self, angle: float) -> None:
         """Turn the vector parts with the load (they live in the co-rotating frame)."""
         self._c, self._s = c, s = math.cos(angle), math.sin(angle)
         if angle:
-            for j, (x, y, f) in self.flows.items():
-                self.flows[j] = (c * x - s * y, s * x + c * y, f)
+            for j, (x, y, f, g, hx, hy, q) in self.flows.items():
+                self.flows[j] = (
+                    c * x - s * y,
+                    s * x + c * y,
+                    f,
+                    g,
+                    c * hx - s * hy,
+                    s * hx + c * hy,
+                    q,
+                )
 
     def turned(self, v: tuple[float, float]) -> tuple[float, float]:
         """``v`` turned by the angle of the last :meth:`turn`."""
@@ -47,18 +58,12 @@ class EdgeFlows:
 
     def adopt(self, j: int, theirs: Flow) -> None:
         """``F_ij = −F_ji``, from ``j``'s latest message (its vector turned to our instant)."""
-        self.flows[j] = (-theirs[0], -theirs[1], -theirs[2])
+        self.flows[j] = tuple(-f for f in theirs)  # type: ignore[assignment]
 
-    def push(self, j: int, dx: float, dy: float, ds: float) -> None:
+    def push(self, j: int, delta: Flow) -> None:
         """``F_ij ← F_ij − Δ_ij``: move ``Δ_ij`` into this robot's estimate."""
-        x, y, s = self.flows[j]
-        self.flows[j] = (x - dx, y - dy, s - ds)
+        self.flows[j] = tuple(f - d for f, d in zip(self.flows[j], delta))  # type: ignore[assignment]
 
     def outflow(self) -> Flow:
         """``Σ_j F_ij``."""
-        fx = fy = fs = 0.0
-        for x, y, s in self.flows.values():
-            fx += x
-            fy += y
-            fs += s
-        return (fx, fy, fs)
+        return tuple(map(sum, zip(ZERO, *self.flows.values())))  # type: ignore[return-value]

@@ -24,8 +24,9 @@ random walk.
 
 Uncertainty: the fit's ``σ̂² M⁻¹`` as it is, every row counted (over 40 runs of the paper's
 scenario at 1 cm/s, seeds 0–39, the rows counted one per 0.2 s gave standard deviations eight
-times the errors'); ``std(m̂) = std(1/m) m̂²``. It does not include
-the drives' gain errors: the fit takes the commanded force for the applied one.
+times the errors'); ``std(m̂) = std(1/m) m̂²``. The fit takes the
+commanded force for the applied one; the pipeline scales its ``m`` by the drives' mean gain
+(:mod:`agent.estimation.drive_gain`).
 """
 
 from __future__ import annotations
