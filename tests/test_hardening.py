@@ -187,7 +187,9 @@ def _forged(rng: random.Random, n: int, tick: int) -> list[tuple[str, bytes]]:
 
 def _share_with_phase(share: Share, phase: int) -> bytes:
     payload = bytearray(encode(share))
-    payload[3 + struct.calcsize("<Hq2dHB2dd")] = phase
+    at = 3 + struct.calcsize("<Hq2dHB2ddd2dd")  # the phase byte
+    assert payload[at] == share.phase  # (fails if the layout moves it)
+    payload[at] = phase
     return bytes(payload)
 
 
