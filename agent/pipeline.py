@@ -460,6 +460,8 @@ class EstimationPipeline:
             mass_std = math.hypot(mass_std * self.consensus.gain, self.mass * team_gain_std)
         k = PUBLISHED_VARIANCE["relative"]
         out: dict = {
+            "drive_gain": self.drive.estimate if self.drive.std is not None else None,
+            "drive_gain_std": self.drive.std,
             "relative_positions_cov": {j: tuple(k * e for e in cov) for j, cov in edges.items()},
             "moment_std": None
             if moment_std is None

@@ -141,6 +141,8 @@ class Estimates:
     Uncertainty (the robust estimators give it; ``None`` or empty otherwise): ``mass_std`` and
     ``moment_std`` are standard deviations (kg, kg m²); ``contact_to_com_cov`` and each
     ``relative_positions_cov[j]`` are covariances ``(xx, xy, yy)`` (m²) of those vectors.
+    ``drive_gain`` is the robot's estimate of its own drive's gain (applied over commanded
+    force, :mod:`agent.estimation.drive_gain`), ``drive_gain_std`` its standard deviation.
     """
 
     robot: int
@@ -163,6 +165,8 @@ class Estimates:
     moment_std: float | None = None
     contact_to_com_cov: Cov2 | None = None
     relative_positions_cov: dict[int, Cov2] = field(default_factory=dict)
+    drive_gain: float | None = None
+    drive_gain_std: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -461,6 +465,8 @@ _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("mass_std", 1),
     ("moment_std", 1),
     ("contact_to_com_cov", 3),
+    ("drive_gain", 1),
+    ("drive_gain_std", 1),
 )
 """The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
@@ -777,10 +783,12 @@ def _estimates(m: Estimates) -> None:
         _covariance("estimates.relative_positions_cov", cov)
     if m.contact_to_com_cov is not None:
         _covariance("estimates.contact_to_com_cov", m.contact_to_com_cov)
-    for name in ("mass_std", "moment_std"):
+    for name in ("mass_std", "moment_std", "drive_gain_std"):
         value = getattr(m, name)
         if value is not None:
             _within(f"estimates.{name}", value, 0.0, _math.inf)
+    if m.drive_gain is not None:
+        _within("estimates.drive_gain", m.drive_gain, 0.0, MAX_GAIN)
 
 
 def _covariance(name: str, cov: tuple[float, float, float]) -> None:

@@ -144,6 +144,7 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
             "settled_s": {},
             **dict.fromkeys(("mass_std", "moment_std", "contact_to_com_cov")),
             "relative_positions_cov": {},
+            **dict.fromkeys(("drive_gain", "drive_gain_std")),
         }
     return {
         "mass": _number(est.mass),
@@ -164,6 +165,8 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
         "relative_positions_cov": {
             str(j): list(c) for j, c in sorted(est.relative_positions_cov.items())
         },
+        "drive_gain": _number(est.drive_gain),
+        "drive_gain_std": _number(est.drive_gain_std),
     }
 
 

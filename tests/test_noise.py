@@ -63,6 +63,8 @@ def test_the_paper_scenario_with_real_sensor_noise(seed: int) -> None:
     for i in range(1, outcome.scenario.n + 1):
         est = outcome.final.estimates[i]
         assert est.mass_std > 0 and est.moment_std > 0 and est.contact_to_com_cov is not None
+        # Ideal drives here: each robot finds its gain 1, to within its uncertainty.
+        assert 0 < est.drive_gain_std < 0.02 and abs(est.drive_gain - 1.0) < 4 * est.drive_gain_std
         assert set(est.relative_positions_cov) == set(outcome.scenario.neighbours(i))
         row = intervals(outcome, i)
         assert row["mass"][0] > 0 and row["contact_to_com"][0] > 0
@@ -70,6 +72,7 @@ def test_the_paper_scenario_with_real_sensor_noise(seed: int) -> None:
     document = results_dict(outcome)
     robot = document["robots"]["1"]
     assert robot["mass_std"] > 0 and len(robot["contact_to_com_cov"]) == 3
+    assert robot["drive_gain"] == outcome.final.estimates[1].drive_gain
     assert set(robot["relative_positions_cov"]) == {"2"}
     assert set(document["intervals"]["1"]) == {
         "mass",

@@ -137,6 +137,8 @@ ESTIMATES_UNCERTAIN = Estimates(
     moment_std=0.05,
     contact_to_com_cov=(4e-6, -1e-6, 9e-6),
     relative_positions_cov={2: (1e-6, 0.0, 2e-6), 4: (3e-6, 1e-6, 1e-6)},
+    drive_gain=1.021,
+    drive_gain_std=0.008,
 )
 ESTIMATES_PARTIAL = Estimates(
     robot=4,
@@ -319,6 +321,8 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         moment_std=maybe(numbers),
         contact_to_com_cov=maybe(covariances),
         relative_positions_cov=st.dictionaries(ids, covariances, max_size=6),
+        drive_gain=maybe(st.floats(0.0, 100.0)),
+        drive_gain_std=maybe(numbers),
     )
     return st.one_of(
         st.builds(Measurement, robot=ids, tick=ticks, time_s=numbers, velocity=pairs, force=pairs),
@@ -373,6 +377,8 @@ DOMAIN_CASES = {
     "share instant not before its tick": Share(2, 3, (0.0, 0.0), 1, instant=3),
     "share switch below -1": Share(2, 3, (0.0, 0.0), 1, switch_at=-7),
     "share mean gain of 1000": Share(2, 3, (0.0, 0.0), 1, gain=1000.0),
+    "estimates with a negative drive gain": Estimates(1, 3, Phase.DONE, drive_gain=-1.0),
+    "estimates with a negative gain std": Estimates(1, 3, Phase.DONE, drive_gain_std=-0.1),
     "share with more flows than neighbours": Share(
         2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * 7), (3, *[0.0] * 7))
     ),
@@ -569,7 +575,7 @@ def test_estimates_with_no_such_phase_are_refused(phase: int) -> None:
     assert "phase" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_FULL, phase=phase)))
 
 
-@pytest.mark.parametrize("present", [1 << 12, 1 << 15, 0xFFFF])
+@pytest.mark.parametrize("present", [1 << 14, 1 << 15, 0xFFFF])
 def test_estimates_presence_bits_past_the_fields_are_refused(present: int) -> None:
     assert "presence" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_EMPTY, present=present)))
 
