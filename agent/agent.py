@@ -38,7 +38,6 @@ class Agent:
         self.inbox = Inbox(self.neighbours)
         self.pipeline = EstimationPipeline(config, self.neighbours)
         self.phase_machine = PhaseMachine(config)
-        self.dt = config.period_s
         self._commanded: Vec2 | None = None
         """The force commanded at the last tick."""
 
@@ -61,7 +60,7 @@ class Agent:
         k = measurement.tick
         inbox, pipeline, phases = self.inbox, self.pipeline, self.phase_machine
         if self._commanded is not None:  # the force measured now was applied since the last tick
-            pipeline.drive_gain(self._commanded, measurement.force, self.dt)
+            pipeline.drive_gain(self._commanded, measurement.force)
         newest = inbox.receive(measurement, shares)
         for e in range(pipeline.instant + 1, newest + 1):
             pipeline.estimate_at(e, inbox, phases)

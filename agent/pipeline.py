@@ -52,8 +52,8 @@ and ``Ĵ`` (not on those they settle by): the drives' gains and the reversing pu
 their fits do not model. Measured over 40 runs of ``heft bench --noise``'s setting (the paper's
 scenario at 1 cm/s with the issue's drives), seeds 20–59: 95 % of the errors fell within 1.96
 published standard deviations (2.45 for the planar ones) with the variances scaled by 1.54,
-1.51 and 2.3 (``Ĵ``'s errors are heavy-tailed; 1.7 holds 90 %). The benchmark's seeds, 0–19,
-were not used."""
+1.51 and 2.3 (``Ĵ``'s errors are heavy-tailed; with 1.7, 94 % of them). The benchmark's seeds,
+0–19, were not used."""
 
 if TYPE_CHECKING:
     from agent.inbox import Inbox
@@ -151,11 +151,13 @@ class EstimationPipeline:
         return ((z_c[0] - h[0]) / gain, (z_c[1] - h[1]) / gain)
 
     # ---------------------------------------------------------------- one instant
-    def drive_gain(self, command: Vec2, measured: Vec2, dt: float) -> None:
+    def drive_gain(self, command: Vec2, measured: Vec2) -> None:
         """The force ``measured`` over the last tick, commanded ``command``: this robot's drive
-        gain, the input of the team's mean gain."""
-        self.drive.update(command, measured, dt)
-        self.consensus.gain_input = self.drive.estimate
+        gain, the input of the team's mean gain (the robust estimators' only; the paper's take
+        every drive for ideal)."""
+        if self.robust:
+            self.drive.update(command, measured, self.dt)
+            self.consensus.gain_input = self.drive.estimate
 
     @property
     def mass(self) -> float | None:
@@ -451,18 +453,20 @@ class EstimationPipeline:
         # σ_g² w / (2 n²) per axis.
         gain_std = self.drive.std or 0.0
         team_gain_std = gain_std / math.sqrt(self.n)
+        moment = self.moment
         moment_std = self.inertia.std if self.inertia is not None else None
         if moment_std is not None:
-            moment = self.moment
             moment_std = math.hypot(moment_std * self._torque_gain, moment * team_gain_std)
         mass_std = self.mass_estimator.std if self.mass_estimator is not None else None
         if mass_std is not None:
             mass_std = math.hypot(mass_std * self.consensus.gain, self.mass * team_gain_std)
-        k = PUBLISHED_VARIANCE["relative"]
+        scale = PUBLISHED_VARIANCE["relative"]
         out: dict = {
-            "drive_gain": self.drive.estimate if self.drive.std is not None else None,
+            "drive_gain": None if self.drive.std is None else self.drive.estimate,
             "drive_gain_std": self.drive.std,
-            "relative_positions_cov": {j: tuple(k * e for e in cov) for j, cov in edges.items()},
+            "relative_positions_cov": {
+                j: tuple(scale * e for e in cov) for j, cov in edges.items()
+            },
             "moment_std": None
             if moment_std is None
             else moment_std * math.sqrt(PUBLISHED_VARIANCE["moment"]),
@@ -473,15 +477,14 @@ class EstimationPipeline:
             alpha = self.angle - self.push_angle
             (a, b), (_, d) = _turned(com_cov, alpha)
             c = self.com.com_offset(alpha)
-            moment = self.moment
             rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
-            k = len(edges)
+            count = len(edges)
             weighted = gain_std * gain_std * self.spread / (2.0 * self.n)  # σ_g² w / 2n²
-            xx = sum(e[0] for e in edges.values()) / k + a + rel2 * c[0] * c[0] + weighted
-            xy = sum(e[1] for e in edges.values()) / k + b + rel2 * c[0] * c[1]
-            yy = sum(e[2] for e in edges.values()) / k + d + rel2 * c[1] * c[1] + weighted
-            k = PUBLISHED_VARIANCE["contact_to_com"]
-            out["contact_to_com_cov"] = (k * xx, k * xy, k * yy)
+            xx = sum(e[0] for e in edges.values()) / count + a + rel2 * c[0] * c[0] + weighted
+            xy = sum(e[1] for e in edges.values()) / count + b + rel2 * c[0] * c[1]
+            yy = sum(e[2] for e in edges.values()) / count + d + rel2 * c[1] * c[1] + weighted
+            scale = PUBLISHED_VARIANCE["contact_to_com"]
+            out["contact_to_com_cov"] = (scale * xx, scale * xy, scale * yy)
         return out
 
 

@@ -72,10 +72,11 @@ class NoiseSettings:
     """N s/m: the spin-up's gain, for both estimators (the default, 4, holds a turn this fast
     only well below its target against the damping that keeps the floor bounded)."""
     push_force: float = 2.0
-    """N: the robust estimators' common push ..."""
+    """N: the robust estimators' common push (the paper's size theirs by eq. 17)."""
     push_flip_s: float = 2.0
-    """s: ... reversed every this long: against noise, the COM's displacement, ``n f T²/8m``,
-    is the mass's signal; the speed it swings by, ``n f T/2m``, is bounded by the floor."""
+    """s: how often the push reverses, for both estimators: against noise, the COM's
+    displacement, ``n f T²/8m``, is the mass's signal; the speed it swings by, ``n f T/2m``,
+    is bounded by the floor."""
 
 
 @dataclass
