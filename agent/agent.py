@@ -46,6 +46,11 @@ class Agent:
         return self.phase_machine.barrier.phase
 
     @property
+    def epoch(self) -> int:
+        """How many times the team has restarted for a changed load."""
+        return self.phase_machine.barrier.epoch
+
+    @property
     def instant(self) -> int:
         """The estimation instant of the current estimates (``-1`` before any)."""
         return self.pipeline.instant
@@ -85,6 +90,7 @@ class Agent:
             gain=consensus.gain,
             gain_centroid=consensus.gain_centroid,
             gain_spread=consensus.gain_spread,
+            epoch=barrier.epoch,
         )
         before = k - HISTORY_TICKS
         inbox.forget(before)

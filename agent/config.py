@@ -584,6 +584,16 @@ class AgentTuning:
     to the spin-up once the kick is over (it takes out the kick's drift; Steps 1–3 need only
     the turn), and applied alone once the team is done, so that the load comes to rest. 0
     leaves the load to coast, as the paper does."""
+    change_threshold: float = bounded(6.0, 0.1, 1000, off=0.0)
+    """With ``estimator = "robust"``: once done, the team probes the load, and a robot whose
+    probe's fit of ``m`` or ``z_C`` differs from its estimate by more than this many standard
+    deviations calls the load changed: the team estimates it again
+    (:mod:`agent.estimation.load_change`). 0: no probes; the load comes to rest."""
+    monitor_gap_s: float = bounded(1.0, 0, 60, "s", min_ticks=1)
+    """s: before each probe, the team damps the COM's velocity for this long."""
+    probe_s: float = bounded(2.0, 0, 60, "s", min_ticks=4)
+    """s: a probe's length ``T`` (rounded to 4 ticks): ``+f``, ``−f``, ``+f`` for ``T/4``,
+    ``T/2``, ``T/4``; the COM swings by ``n f T² / 16m``."""
     push_direction: tuple[float, float] = (0.0, 1.0)
     """Direction in ``W`` of the common force ``f`` of Steps 5–7: a vector of length in
     [0.001, 1000] (only its direction counts)."""

@@ -272,7 +272,13 @@ class AgentNode:
             self.port.report(agent.estimates())
         if agent.phase != self.last_phase or k % 100 == 0:
             if agent.phase != self.last_phase:
-                log.info("robot %d: tick %d: phase %s", self.robot, k, agent.phase.label)
+                epoch = agent.epoch
+                again = (
+                    f" (epoch {epoch}: the load changed)"
+                    if epoch and agent.phase == Phase.INERTIA
+                    else ""
+                )
+                log.info("robot %d: tick %d: phase %s%s", self.robot, k, agent.phase.label, again)
             self.last_phase = agent.phase
             self.port.report(self.status(k))
         self.next_tick = k + 1

@@ -10,9 +10,14 @@ excite    kick, then geometry-free spin-up        Step 1 ``z_ij``, Step 2 ``z_i`
           and damping
 inertia   ``f_i = ±k z_i⊥`` (eq. 14)                Step 4 ``J``
 push      common ``±f`` (eq. 17)                  Step 5 ``z_C``, Step 6 ``ṗ_C``, Step 7 ``m``
-done      damping: the load comes to rest         (tracking goes on)
+done      damping: the load comes to rest, or     (tracking goes on; with ``robust``, the
+          (``robust``) probes and damping         probes test the load for a change)
 halted    zero                                    (a robot was lost: the team stops)
 ======== ======================================= ===========================================
+
+A changed load (``robust``): a robot whose probe finds the load no longer the one estimated
+(:mod:`agent.estimation.load_change`) is ready to leave ``done``, and the team restarts at
+``inertia`` in a new epoch at an agreed tick (:mod:`agent.coordination`).
 
 ``halted`` is entered by :meth:`PhaseMachine.halt` when a neighbour is lost, and reaches the
 rest of the team through the barrier's catch-up rule (it is the highest phase). The paper
@@ -39,7 +44,13 @@ The force laws:
   reverses on the agreed clock (``push_flip_s = T``): ``+f`` for ``T/2``, then ``−f`` and
   ``+f`` for ``T`` each, in turn (:meth:`PhaseMachine.push_sign`), so that the COM's velocity
   swings about the one it had and it travels back and forth;
-- *done*: the damping ``−b ṗ_Ci`` alone brings the load to rest.
+- *done*: the damping ``−b ṗ_Ci`` alone brings the load to rest. With ``estimator =
+  "robust"`` (and ``change_threshold`` > 0) the team keeps watching the load instead, in cycles
+  on the agreed clock: a gap of ``monitor_gap_s`` in which each robot damps the COM's velocity,
+  ``−b ṗ̂_C`` (Step 6's estimate: the load keeps its turn, which Step 5's fit needs, and loses
+  its drift), then a *probe* of ``probe_s = T``, the push's common force ``+f`` for ``T/4``,
+  ``−f`` for ``T/2`` and ``+f`` for ``T/4``: the COM's velocity and place come back to where
+  they were, after a swing of ``n f T²/16m``; every other probe swings the other way.
 
 Every command is bounded by ``max_force`` (:func:`agent.safety.saturate`).
 """
@@ -75,6 +86,11 @@ class OwnEstimates(Protocol):
     zdot: dict[int, Vec2]
     """``ż_ij`` at the estimation instant, by neighbour."""
     settle: SettleDetectors
+
+    com_velocity: Vec2 | None
+    """``ṗ_C`` (Step 6)."""
+    changed: bool
+    """Whether a probe found the load changed (:mod:`agent.estimation.load_change`)."""
 
     @property
     def centroid(self) -> Vec2:
@@ -123,6 +139,13 @@ class PhaseMachine:
         self.push: Vec2 = (0.0, 0.0)
         """The common force ``f`` of the push phase (eq. 17), before its sign."""
         self.push_flip_ticks = round(tuning.push_flip_s / self.dt)
+        self.monitoring = self.robust and tuning.change_threshold > 0.0
+        """Whether the team probes the load once done (see the module docstring)."""
+        self.probe_ticks = 4 * max(1, round(tuning.probe_s / (4 * self.dt)))
+        """A probe's length: a multiple of 4 ticks."""
+        self.gap_ticks = max(1, round(tuning.monitor_gap_s / self.dt))
+        self.monitor_ticks = self.gap_ticks + self.probe_ticks
+        """A monitoring cycle: the gap, then a probe."""
         self._ready: Callable[[int, OwnEstimates], bool]
         self._law: Callable[[int, OwnEstimates, Vec2], Vec2]
         self._begin(Phase.EXCITE)
@@ -130,6 +153,11 @@ class PhaseMachine:
     @property
     def phase(self) -> Phase:
         return self.barrier.phase
+
+    @property
+    def epoch(self) -> int:
+        """How many times the team has restarted for a changed load."""
+        return self.barrier.epoch
 
     @property
     def since(self) -> int:
@@ -162,6 +190,8 @@ class PhaseMachine:
             # only push wrongly, so it stops the team instead.
             self.halt(k)
             return True
+        if phase == Phase.INERTIA:  # (again, in a new epoch: the later phases are to come)
+            self.entered = {p: t for p, t in self.entered.items() if p < Phase.INERTIA}
         self.entered[phase] = k
         if phase == Phase.INERTIA:
             w = self.n * own.spread
@@ -207,7 +237,9 @@ class PhaseMachine:
             Phase.EXCITE: (self._excite_ready, self._excite_force),
             Phase.INERTIA: (self._inertia_ready, self._inertia_force),
             Phase.PUSH: (self._push_ready, self._push_force),
-            Phase.DONE: (_never_ready, self._brake_force),
+            Phase.DONE: (self._changed, self._monitor_force)
+            if self.monitoring
+            else (_never_ready, self._brake_force),
         }
         self._ready, self._law = laws.get(phase, (_never_ready, _no_force))
 
@@ -267,15 +299,53 @@ class PhaseMachine:
         sign = self.push_sign(k)
         return (sign * self.push[0], sign * self.push[1])
 
+    @staticmethod
+    def _changed(k: int, own: OwnEstimates) -> bool:
+        return own.changed
+
+    def probe_start(self, tick: int) -> int | None:
+        """The first tick of the last probe begun by tick ``tick`` (``None`` while the team is
+        not done, not probing, or in the gap before the first probe)."""
+        done = self.entered.get(Phase.DONE)
+        if not self.monitoring or done is None or tick < done + self.gap_ticks:
+            return None
+        since = tick - done - self.gap_ticks
+        return tick - since % self.monitor_ticks
+
+    def probe_sign(self, tick: int) -> float:
+        """The common force's sign during tick ``tick`` of a probe: ``+`` for ``T/4``, ``−``
+        for ``T/2``, ``+`` for ``T/4`` (``T`` = ``probe_s``), every other probe the other way
+        round; 0 in the gaps between probes."""
+        start = self.probe_start(tick)
+        if start is None:
+            return 0.0
+        since, quarter = tick - start, self.probe_ticks // 4
+        if since >= self.probe_ticks:
+            return 0.0
+        first = (start - self.entered[Phase.DONE]) // self.monitor_ticks % 2 == 0
+        middle = quarter <= since < self.probe_ticks - quarter
+        return -1.0 if middle == first else 1.0
+
+    def _monitor_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
+        """A probe's common force, or the gap's damping of the COM's velocity."""
+        sign = self.probe_sign(k)
+        if sign:
+            return (sign * self.push[0], sign * self.push[1])
+        v = own.com_velocity or velocity
+        b = self.tuning.brake_gain
+        return (-b * v[0], -b * v[1])
+
     def push_sign(self, tick: int) -> float:
         """The sign of the common force during tick ``tick`` of the push phase: ``+`` for the
         first ``T/2``, then ``−`` and ``+`` for ``T`` each (``T`` = ``push_flip_s``; always
-        ``+`` for ``T = 0``)."""
+        ``+`` for ``T = 0``); the other way round in the robust estimators' odd epochs (a
+        changed load's push swings the load back towards where it started)."""
         period = self.push_flip_ticks
         since = tick - self.entered.get(Phase.PUSH, tick)
+        first = -1.0 if self.robust and self.epoch % 2 else 1.0
         if period <= 0 or since < period // 2:
-            return 1.0
-        return -1.0 if (since - period // 2) // period % 2 == 0 else 1.0
+            return first
+        return -first if (since - period // 2) // period % 2 == 0 else first
 
     def mean_push_sign(self, first: int, last: int) -> float:
         """The mean sign of the common force over ticks ``first..last − 1`` (Steps 5–7's

@@ -40,6 +40,7 @@ from agent.estimation.drive_gain import DriveGain
 from agent.estimation.geometry import Vec2, rotate
 from agent.estimation.inertia import InertiaEstimator
 from agent.estimation.inertia_fit import InertiaFit
+from agent.estimation.load_change import ProbeFit
 from agent.estimation.mass import MassEstimator
 from agent.estimation.mass_fit import MassFit
 from agent.estimation.relative_position import RelativePosition
@@ -112,6 +113,14 @@ class EstimationPipeline:
         self.lag = 0.0
         """``τ_d`` (s), the drives' lag from Step 4's fit (robust estimators; Steps 5 and 7)."""
         self.com_velocity: Vec2 | None = None
+        self.probe: ProbeFit | None = None
+        """Once done, the current probe's fits (:mod:`agent.estimation.load_change`)."""
+        self.probe_began = -1
+        """The first tick of :attr:`probe`'s probe."""
+        self.change_score: float | None = None
+        """The last probe's test of the load against the estimates (standard deviations)."""
+        self.changed = False
+        """Whether a probe found the load changed since the team's last (re)start."""
 
     # ---------------------------------------------------------------- what the phases read
     @property
@@ -309,6 +318,7 @@ class EstimationPipeline:
             return
         self.com_velocity = com_velocity(v_i, omega, offset)  # Step 6, eq. (7)
         if not pushing:
+            self._watch(e, prev, span, phases)
             return
         if self.mass_estimator is None:
             self.mass_estimator = (
@@ -327,6 +337,54 @@ class EstimationPipeline:
             std = self.mass_estimator.std if self.robust else None
             self.settle.mass.update((mass,), e, std)
 
+    def _watch(self, e: int, prev: int, span: float, phases: PhaseMachine) -> None:
+        """Once done, each probe's fit over the interval ``span`` from ``prev`` to ``e``, and at
+        the probe's last instant its test against the estimates
+        (:mod:`agent.estimation.load_change`)."""
+        start = phases.probe_start(e)
+        if start is None or self.mass_estimator is None or self.com_velocity is None:
+            return
+        if self.probe is not None and self.probe_began != start:
+            self.probe = None  # (its last instant was never measured)
+        if e == start:
+            mass = self.mass_estimator.estimate
+            if mass is None or mass <= 0.0:
+                return
+            self.probe = ProbeFit(self.n, mass, phases.push, self.lag, self.angle)
+            self.probe_began = start
+            self.probe.update(self.com_velocity, self.omega, self.angle, 0.0, 0.0)
+            return
+        end = start + phases.probe_ticks
+        if self.probe is None or prev < start or e > end:
+            return
+        sign = sum(phases.probe_sign(t) for t in range(prev, e)) / (e - prev)
+        self.probe.update(self.com_velocity, self.omega, self.angle, sign, span)
+        if e < end:
+            return
+        probe, self.probe = self.probe, None
+        published = self._published_load()
+        if published is None:
+            return
+        scores = probe.score(*published)
+        if scores is not None:
+            self.change_score = max(scores)
+            self.changed = self.changed or self.change_score > self.tuning.change_threshold
+
+    def _published_load(self) -> tuple[float, tuple[float, float, float]] | None:
+        """The published relative standard deviation of ``m̂`` and covariance of this robot's
+        ``contact_to_com``, now (``None`` if either is not known)."""
+        relative = {j: z for j in self.neighbours if (z := self.relative_position(j)) is not None}
+        z_c = self.com_offset(self.angle - self.push_angle)
+        mass = self.mass
+        if z_c is None or not mass:
+            return None
+        z_i = self.consensus.centroid
+        published = self._uncertainty(relative, (-(z_i[0] + z_c[0]), -(z_i[1] + z_c[1])))
+        mass_std, cov = published["mass_std"], published.get("contact_to_com_cov")
+        if mass_std is None or cov is None:
+            return None
+        return mass_std / mass, cov
+
     def _update_com(self, omega: float, alpha: float, sign: float, span: float) -> None:
         if self.robust:
             self.com.update(alpha, sign, span)
@@ -337,6 +395,8 @@ class EstimationPipeline:
     def enter(self, phase: Phase, k: int, phases: PhaseMachine) -> None:
         """The team begins ``phase`` at tick ``k``: start the steps that run in it."""
         if phase == Phase.INERTIA:
+            if phases.epoch:  # a changed load: Steps 4-7 again (the contacts have not moved)
+                self._forget_load()
             self.started[4] = k
             self.inertia = (
                 InertiaFit(self.forgetting, self._torque_scale_std())
@@ -361,6 +421,15 @@ class EstimationPipeline:
                     self.forgetting,
                 )
             )
+
+    def _forget_load(self) -> None:
+        """Drop Steps 4–7's estimates and settling, and the probes' verdict."""
+        self.com = self.observer = self.mass_estimator = self.probe = None
+        self.com_velocity = None
+        self.changed = False
+        for step in (5, 6, 7):
+            self.started.pop(step, None)
+        self.settle = self.settle.with_load_forgotten()
 
     def _torque_scale_std(self) -> float:
         """The relative standard deviation of ``w = Σ‖z_i‖²``, which scales the torque Step 4
@@ -431,6 +500,8 @@ class EstimationPipeline:
             contact_to_com=contact_to_com,
             started=dict(self.started),
             settled=self.settle.first_settled(),
+            epoch=phases.epoch,
+            change_score=self.change_score,
             **uncertainty,
         )
 

@@ -104,9 +104,10 @@ class Share:
       ``Σ g_i ‖z_i‖² / n`` (see :mod:`agent.estimation.centroid`).
     - ``flows``: ``(j, F_x, F_y, F_s, F_g, F_hx, F_hy, F_q)`` per neighbour ``j``: the sender's
       outflows of the iterations on edge ``(sender, j)`` (see :mod:`agent.estimation.flows`).
-    - ``phase``, ``ready``, ``switch_at``: the team's phase barrier (see
+    - ``phase``, ``ready``, ``switch_at``, ``epoch``: the team's phase barrier (see
       :mod:`agent.coordination`): the sender's phase, the bitmask of robots known to be ready
-      to leave it, and the agreed tick of the switch (``-1`` while none is agreed).
+      to leave it, the agreed tick of the switch (``-1`` while none is agreed), and how many
+      times the team has restarted for a changed load.
     """
 
     sender: int
@@ -123,6 +124,7 @@ class Share:
     gain: float = 1.0
     gain_centroid: Vec2 = (0.0, 0.0)
     gain_spread: float = 0.0
+    epoch: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,6 +145,10 @@ class Estimates:
     ``relative_positions_cov[j]`` are covariances ``(xx, xy, yy)`` (m²) of those vectors.
     ``drive_gain`` is the robot's estimate of its own drive's gain (applied over commanded
     force, :mod:`agent.estimation.drive_gain`), ``drive_gain_std`` its standard deviation.
+
+    ``epoch`` counts the team's restarts for a changed load (:mod:`agent.coordination`);
+    ``change_score`` is the last probe's test of the load against the estimates, in standard
+    deviations (:mod:`agent.estimation.load_change`; ``None`` before the first probe ends).
     """
 
     robot: int
@@ -167,6 +173,8 @@ class Estimates:
     relative_positions_cov: dict[int, Cov2] = field(default_factory=dict)
     drive_gain: float | None = None
     drive_gain_std: float | None = None
+    epoch: int = 0
+    change_score: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -429,7 +437,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 4
+WIRE_VERSION = 5
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -440,15 +448,15 @@ class DecodeError(ValueError):
 
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqB")
+_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqHB")
 _FLOW = _struct.Struct("<H7d")
 _FLOW_FIELDS = 8
 """A flow: the neighbour, then :data:`agent.estimation.flows.Flow`'s seven numbers."""
 _CLOCK = _struct.Struct("<qd")
-_ESTIMATES = _struct.Struct("<HqBqHBBBB")
+_ESTIMATES = _struct.Struct("<HqBqHBBBBH")
 """robot, tick, phase, phase_since, which optional values follow (bit per
-:data:`_OPTIONAL_ESTIMATES` entry), then how many relative positions, their covariances,
-started and settled steps follow them."""
+:data:`_OPTIONAL_ESTIMATES` entry), how many relative positions, their covariances,
+started and settled steps follow them, then the epoch."""
 _NEIGHBOUR = _struct.Struct("<H2d")
 _NEIGHBOUR_COV = _struct.Struct("<H3d")
 _STEP = _struct.Struct("<Bq")
@@ -467,6 +475,7 @@ _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("contact_to_com_cov", 3),
     ("drive_gain", 1),
     ("drive_gain_std", 1),
+    ("change_score", 1),
 )
 """The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
@@ -529,6 +538,7 @@ def encode(message: object) -> bytes:
             m.ready,
             m.switch_at,
             m.instant,
+            m.epoch,
             len(m.flows),
         )
         return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
@@ -557,6 +567,7 @@ def _encode_estimates(m: Estimates) -> bytes:
         len(m.relative_positions_cov),
         len(m.started),
         len(m.settled),
+        m.epoch,
     )
     return b"".join(
         (
@@ -587,8 +598,8 @@ def _repeats(layout: _struct.Struct, count: int) -> _struct.Struct:
 def _decode_estimates(body: memoryview) -> Estimates:
     if len(body) < _ESTIMATES.size:
         raise DecodeError(f"estimates: {len(body)} bytes, expected at least {_ESTIMATES.size}")
-    robot, tick, phase, since, present, neighbours, covs, started, settled = _ESTIMATES.unpack_from(
-        body
+    robot, tick, phase, since, present, neighbours, covs, started, settled, epoch = (
+        _ESTIMATES.unpack_from(body)
     )
     if present >> len(_OPTIONAL_ESTIMATES):
         raise DecodeError(f"estimates: presence bits 0x{present:04x} name no field")
@@ -640,6 +651,7 @@ def _decode_estimates(body: memoryview) -> Estimates:
         started=steps,
         settled=done,
         relative_positions_cov=relative_cov,
+        epoch=epoch,
         **optional,
     )
 
@@ -708,6 +720,8 @@ MAX_FLOW = 1e9
 """What has flowed on an edge of the consensus iterations (m, m² and gains)."""
 MAX_GAIN = 100.0
 """A drive's gain, or the team's mean gain as a consensus state."""
+MAX_EPOCH = 10_000
+"""The team's restarts for a changed load in one run (one a second for almost three hours)."""
 
 
 def _within(name: str, value: float, low: float, high: float) -> None:
@@ -747,6 +761,7 @@ def _share(m: Share) -> None:
         _bounded("share.centroid", m.centroid, MAX_DISTANCE)
     _within("share.spread", m.spread, -(MAX_DISTANCE**2), MAX_DISTANCE**2)
     _within("share.switch_at", m.switch_at, -1, MAX_TICK)
+    _within("share.epoch", m.epoch, 0, MAX_EPOCH)
     _within("share.instant", m.instant, -1, m.tick - 1)
     _within("share.flows (how many)", len(m.flows), 0, m.degree)
     _within("share.gain", m.gain, -MAX_GAIN, MAX_GAIN)
@@ -774,6 +789,7 @@ def _estimates(m: Estimates) -> None:
     _robot_id("estimates.robot", m.robot)
     _within("estimates.tick", m.tick, -1, MAX_TICK)
     _within("estimates.phase_since", m.phase_since, 0, MAX_TICK)
+    _within("estimates.epoch", m.epoch, 0, MAX_EPOCH)
     for j in m.relative_positions:
         _robot_id("estimates.relative_positions", j)
     for step in (*m.started, *m.settled):
@@ -783,7 +799,7 @@ def _estimates(m: Estimates) -> None:
         _covariance("estimates.relative_positions_cov", cov)
     if m.contact_to_com_cov is not None:
         _covariance("estimates.contact_to_com_cov", m.contact_to_com_cov)
-    for name in ("mass_std", "moment_std", "drive_gain_std"):
+    for name in ("mass_std", "moment_std", "drive_gain_std", "change_score"):
         value = getattr(m, name)
         if value is not None:
             _within(f"estimates.{name}", value, 0.0, _math.inf)
@@ -897,7 +913,7 @@ def _decode(kind: type, payload: bytes):
         fixed = body[: _SHARE.size]
         values = _unpack(_SHARE, fixed, "share")
         s, t, vx, vy, deg, has, cx, cy, spread, gain, hx, hy, q = values[:13]
-        phase, ready, switch_at, instant, count = values[13:]
+        phase, ready, switch_at, instant, epoch, count = values[13:]
         rest = body[_SHARE.size :]
         if len(rest) != count * _FLOW.size:
             raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
@@ -920,6 +936,7 @@ def _decode(kind: type, payload: bytes):
             gain,
             (hx, hy),
             q,
+            epoch,
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))

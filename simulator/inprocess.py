@@ -4,9 +4,11 @@ as fast as the machine allows.
 Each tick ``k``: the plant is sampled, every agent steps on its own measurement and on the
 messages delivered to it so far (it uses those stamped before ``k``), the agents' force commands
 go to the plant, their messages go through the transport, and the plant advances one sensor
-period. The run ends once every agent has reached the ``done`` phase, or at the scenario's
-``max_time_s``. Ground truth is recorded beside the agents' estimates of the same instant, for
-evaluation only (an agent that lost a message may lag a tick: such instants are not recorded).
+period. The run ends once every agent has reached the ``done`` phase (and the scenario's
+:attr:`~simulator.scenario.Scenario.end_s` has passed: its load changes and its hold), or at
+the scenario's ``max_time_s``. Ground truth is recorded beside the agents' estimates of the
+same instant, for evaluation only (an agent that lost a message may lag a tick: such instants
+are not recorded).
 
 ``link="can"`` is the reference of a run over the AGVs' CAN buses (``heft run --can``): every
 measurement and every command is clamped and quantised as it is when it crosses the bus
@@ -116,6 +118,7 @@ def run_inprocess(
     agents = make_agents(scenario)
     transport = transport or InMemoryTransport(scenario.n, scenario.edges)
     max_ticks = round(scenario.run.max_time_s / scenario.period_s)
+    end_tick = scenario.end_tick
     history: History[Sample] = History()
     phase_ticks: dict[str, int] = {}
     started = time.perf_counter()
@@ -157,7 +160,8 @@ def run_inprocess(
             phase_ticks.setdefault(team_phase.label, k)
             if progress is not None and k % progress_every == 0:
                 progress(k, k * scenario.period_s, agents)
-            if not finishing and (team_phase >= Phase.DONE or k >= max_ticks):
+            ended = team_phase == Phase.HALTED or (team_phase == Phase.DONE and k >= end_tick)
+            if not finishing and (ended or k >= max_ticks):
                 finishing = True
                 converged = all(a.phase == Phase.DONE for a in agents)
                 give_up = k + ALIGN_TICKS

@@ -186,15 +186,18 @@ class Collector:
 
     The final instant is decided by the team's state, not by message timing: it is the first
     instant at which every robot is done, ``max_i phase_since_i`` over the robots' ``done``
-    estimates — the instant the in-process run ends at.
+    estimates (and not before the scenario's ``end_s``) — the instant the in-process run ends
+    at.
 
     Each subscription queues in Zenoh's own FIFO (:data:`FIFO_CAPACITY`), emptied by
     :meth:`drain`: reception never waits for this process's interpreter, so a launcher slowed
     down by its machine does not back up the router's link to it, where messages that may be
     dropped would be (a run whose final instant is missed ends on a later one)."""
 
-    def __init__(self, session, keys: Keys, n: int, record_every: int):
+    def __init__(self, session, keys: Keys, n: int, record_every: int, end_tick: int = 0):
         self.n = n
+        self.end_tick = end_tick
+        """The earliest final instant (the scenario's load changes and hold)."""
         self.record_every = record_every
         self.rejects = RejectLog(LOG, "launcher")
         self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
@@ -302,6 +305,8 @@ class Collector:
             self._halt()
         if est.phase == Phase.DONE:
             self.done_since[est.robot] = est.phase_since
+        else:  # (a changed load: the team estimates it again)
+            self.done_since.pop(est.robot, None)
         self.estimates[est.tick][est.robot] = est
         self._complete(est.tick)
 
@@ -324,7 +329,7 @@ class Collector:
         """The first instant at which every robot was done (the final instant)."""
         if len(self.done_since) < self.n:
             return None
-        return max(self.done_since.values())
+        return max(max(self.done_since.values()), self.end_tick)
 
     def _complete(self, instant: int) -> None:
         robots = self.estimates.get(instant)
@@ -481,7 +486,7 @@ def run_zenoh(
         try:
             router_child = start("router", ["router", "--listen", router])
             with _launcher_session(router, router_child) as session:
-                collector = Collector(session, keys, scenario.n, record_every)
+                collector = Collector(session, keys, scenario.n, record_every, scenario.end_tick)
                 if on_ready is not None:
                     on_ready(router, team)
                 plant: Child | None = None

@@ -26,6 +26,11 @@ reports ``f_i`` averaged over the tick's substeps (what the load felt), plus the
 The gains and the actuator noise come from a random stream of their own (:data:`ACTUATOR_STREAM`),
 so a run's sensor noise is the same with actuators ideal or not.
 
+Load changes (``scenario.events``): at the first tick at or after a change's ``at_s`` the body
+takes its new mass, moment and COM before the period is integrated (:meth:`Plant.change_load`).
+The load frame stays where it is, and so do the contacts and their velocities; only the COM
+moves within the load.
+
 Implementation notes (pymunk 7): the body carries the scenario's mass and moment and has no
 shapes (a shape with a density would override them); space gravity is zero and damping is off;
 ``body.force``/``body.torque`` are cleared by every step, so the held forces are re-applied at
@@ -111,6 +116,8 @@ class Plant:
         """How far a drive's force goes towards its target in one substep."""
         self._drive_force: list[Vec2] = [_ZERO] * self._n
         """Each drive's force now (with a lag it carries over from one tick to the next)."""
+        self._events = list(scenario.events)
+        """The load changes still to come, first first."""
 
     @property
     def n(self) -> int:
@@ -182,6 +189,9 @@ class Plant:
         with ``A = Σ a_i × f_i`` and ``B = Σ a_i · f_i``: the same as applying each force at its
         contact's world point, at two numbers per substep.
         """
+        while self._events and self.time_s >= self._events[0].at_s - 1e-9:
+            event = self._events.pop(0)
+            self.change_load(event.mass, event.moment, event.com)
         if not self._ideal:
             self._advance_through_drives()
             return
@@ -239,6 +249,27 @@ class Plant:
         m = self._substeps
         self._applied = tuple((acc[0] / m, acc[1] / m) for acc in total)
         self.tick += 1
+
+    def change_load(
+        self, mass: float | None = None, moment: float | None = None, com: Vec2 | None = None
+    ) -> None:
+        """Give the load a new mass (kg), moment of inertia about its new COM (kg m²) and COM
+        (load frame, m), each when given. The load frame keeps its pose and every point of the
+        load its velocity: the COM's velocity becomes that of the new COM's point."""
+        body = self._body
+        if com is not None:
+            cog = Vec2d(float(com[0]), float(com[1]))
+            origin = body.position
+            velocity = body.velocity_at_world_point(body.local_to_world(cog))
+            body.center_of_gravity = cog
+            body.position = origin  # (pymunk keeps the COM's world point, not the origin's)
+            body.velocity = velocity
+            self._cog = cog
+            self._arms = tuple((p.x - cog.x, p.y - cog.y) for p in self._local)
+        if mass is not None:
+            body.mass = float(mass)
+        if moment is not None:
+            body.moment = float(moment)
 
     def excursion(self) -> tuple[Vec2, Vec2, float]:
         """The COM's position and velocity and ω now (cheaper than :meth:`truth`, for a check

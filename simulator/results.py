@@ -302,6 +302,41 @@ def floor_check(outcome: RunOutcome) -> dict[str, Any]:
     }
 
 
+def load_changes(outcome: RunOutcome) -> dict[str, Any]:
+    """The scenario's load changes and the team's restarts (:mod:`agent.coordination`): each
+    change with the first restart after it (``restarted_s``, ``None`` if the team never
+    restarted for it) and the delay (``latency_s``); every restart (``restarts_s``, from the
+    recorded estimates: the tick each epoch began); and the restarts that followed no change
+    (``false_alarms``)."""
+    period = outcome.scenario.period_s
+    began: dict[int, int] = {}
+    for sample in (*outcome.history, outcome.final):
+        for est in sample.estimates.values():
+            start = est.started.get(4)
+            if est.epoch > 0 and start is not None:
+                began[est.epoch] = min(began.get(est.epoch, start), start)
+    restarts = [began[e] * period for e in sorted(began)]
+    changes = [
+        {
+            "at_s": event.at_s,
+            **{k: v for k, v in (("mass", event.mass), ("moment", event.moment)) if v is not None},
+            **({"com": list(event.com)} if event.com is not None else {}),
+            "restarted_s": None,
+            "latency_s": None,
+        }
+        for event in outcome.scenario.events
+    ]
+    false_alarms = 0
+    for t in restarts:
+        before = [c for c in changes if c["at_s"] <= t]
+        if before and before[-1]["restarted_s"] is None:
+            before[-1]["restarted_s"] = t
+            before[-1]["latency_s"] = t - before[-1]["at_s"]
+        else:
+            false_alarms += 1
+    return {"changes": changes, "restarts_s": restarts, "false_alarms": false_alarms}
+
+
 def team_phases(outcome: RunOutcome) -> dict[str, float]:
     """When the team entered each force regime (s), from the run's phase switches."""
     period = outcome.scenario.period_s
@@ -333,6 +368,7 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
         "intervals": {str(i): intervals(outcome, i) for i in range(1, outcome.scenario.n + 1)},
         "rejections": rejection_counts(outcome.transport.get("rejections")),
         "floor": floor_check(outcome),
+        "load_changes": load_changes(outcome),
     }
     if "bridges" in outcome.transport:  # a run over CAN: each robot's AGV bridge's counters
         document["bridges"] = outcome.transport["bridges"]
@@ -371,6 +407,7 @@ def failed_results_dict(
         "intervals": {str(i): None for i in range(1, n + 1)},
         "rejections": rejection_counts(rejections),
         "floor": None,
+        "load_changes": None,
     }
 
 
@@ -469,6 +506,9 @@ def format_table(outcome: RunOutcome) -> str:
     lines.append("(start: the first robot began the step; end: the last robot's estimate settled)")
     lines.append(f"team force regimes from: {regimes or '-'}")
     lines.append(_floor_line(floor_check(outcome)))
+    changes = load_changes(outcome)
+    if changes["changes"] or changes["restarts_s"]:
+        lines.append(_changes_line(changes))
     lines += _interval_lines(outcome)
     rejected = _rejections_line(outcome.transport.get("rejections"))
     if rejected:
@@ -487,6 +527,24 @@ def _floor_line(floor: dict[str, Any]) -> str:
         f" speed {floor['speed']:.2f} m/s ({limits['speed']:g}),"
         f" |ω| {floor['omega']:.2f} rad/s ({limits['omega']:g}): {verdict}"
     )
+
+
+def _changes_line(changes: dict[str, Any]) -> str:
+    parts = []
+    for c in changes["changes"]:
+        what = ", ".join(
+            f"{k} {c[k]}" if k != "com" else f"com ({c[k][0]:g}, {c[k][1]:g})"
+            for k in ("mass", "moment", "com")
+            if k in c
+        )
+        found = (
+            f"restarted {c['latency_s']:.2f} s later"
+            if c["latency_s"] is not None
+            else "NOT NOTICED"
+        )
+        parts.append(f"at {c['at_s']:g} s ({what}): {found}")
+    alarms = changes["false_alarms"]
+    return f"load changes: {'; '.join(parts) or 'none'}; false alarms: {alarms}"
 
 
 def _interval_lines(outcome: RunOutcome) -> list[str]:

@@ -17,6 +17,9 @@ A scenario is a TOML file (``simulator/scenarios/paper.toml`` is the paper's Sec
     [floor]                   # optional: travel_m = 3.0, speed = 2.0 (m/s), omega = 2.0 (rad/s)
     [run]
     seed = 1
+    [[events]]                # optional, any number: the load changes at at_s
+    at_s = 30.0
+    mass = 6.0                # kg; any of mass, moment (kg m², about the new COM), com
 
 :func:`load_scenario` reads a file and :func:`parse_scenario` a table already decoded; both
 return a validated, frozen :class:`Scenario` or raise :class:`ScenarioError`, whose one-line
@@ -44,6 +47,7 @@ from agent.config import (
     AgentTuning,
     ConfigError,
     bounded,
+    bounds,
     check_bounds,
     from_table,
     toml_fields,
@@ -73,6 +77,9 @@ GYRATION_RANGE = (0.01, 1.0)
 """The moment of inertia's radius of gyration ``sqrt(J/m)``, as fractions of the polygon's
 diameter: a load whose mass lies within its outline stays below its diameter, and one below
 1 % of it would be a point mass on a weightless plate."""
+
+MAX_EVENTS = 100
+"""Load changes (``[[events]]``) in a scenario, at most."""
 
 MIN_CONTACT_SPACING = 0.05
 """m: two contacts must be at least this far apart."""
@@ -205,6 +212,43 @@ class Floor:
 
 
 @dataclass(frozen=True)
+class LoadChange:
+    """A change of the load at ``at_s`` (``[[events]]``): part of it dropped or added, as in the
+    paper's motivation. Each of ``mass``, ``moment`` and ``com`` that is given replaces the
+    load's; the robots keep holding it at the same contacts, and every contact's velocity is
+    unchanged at the instant of the change (the load's velocity field is continuous)."""
+
+    at_s: float = bounded(dataclasses.MISSING, 0, MAX_TIME_S, "s", open_low=True)
+    """s of simulated time, within ``run.max_time_s``; the events in increasing order."""
+    mass: float | None = None
+    """kg, in [0.01, 10000]."""
+    moment: float | None = None
+    """kg m² about the (new) COM, in [0.0001, 1000000], with the body's radius-of-gyration
+    range."""
+    com: Vec2 | None = None
+    """The new COM in the load frame (m), within the polygon's bounding box."""
+
+    def validate(self, where: str) -> None:
+        """Raise :class:`ConfigError` naming the key unless every given field is in range."""
+        check_bounds(self, where)
+        if self.mass is not None:
+            _BODY_BOUNDS["mass"].check(f"{where}.mass", self.mass)
+        if self.moment is not None:
+            _BODY_BOUNDS["moment"].check(f"{where}.moment", self.moment)
+        if self.mass is None and self.moment is None and self.com is None:
+            raise ConfigError(f"{where}: expected at least one of mass, moment, com")
+
+    def applied_to(self, body: Body) -> Body:
+        """``body`` after this change."""
+        return dataclasses.replace(
+            body,
+            mass=body.mass if self.mass is None else self.mass,
+            moment=body.moment if self.moment is None else self.moment,
+            com=body.com if self.com is None else self.com,
+        )
+
+
+@dataclass(frozen=True)
 class RunSettings:
     """How a run is simulated."""
 
@@ -220,6 +264,10 @@ class RunSettings:
     second. 1 is real time; below 1 gives each tick more wall time, for a machine that cannot
     keep up at the sensor rate (User-Mode Linux, a loaded laptop). The physics, the ticks and
     the estimates are the same; only the wall time between ticks changes. Lockstep ignores it."""
+    hold_s: float = bounded(0.0, 0, MAX_TIME_S, "s")
+    """Simulated seconds the run goes on after the last load change (``[[events]]``; after
+    the start when there is none) before it may end with the team done: the time the team has
+    to notice a change, and, with no change, to show it raises no false alarm."""
 
     def validate(self, where: str) -> None:
         """Raise :class:`ConfigError` naming the key and its range unless every field is in
@@ -243,6 +291,28 @@ class Scenario:
     description: str = ""
     actuators: Actuators = Actuators()
     floor: Floor = Floor()
+    events: tuple[LoadChange, ...] = ()
+    """The load's changes during the run, in time order."""
+
+    @property
+    def end_s(self) -> float:
+        """The earliest simulated time (s) at which a run with the team done may end: the last
+        load change's time (0 without one) plus ``run.hold_s``."""
+        last = self.events[-1].at_s if self.events else 0.0
+        return last + self.run.hold_s
+
+    @property
+    def end_tick(self) -> int:
+        """The first tick at or after :attr:`end_s`."""
+        return math.ceil(self.end_s / self.period_s - 1e-9)
+
+    def body_at(self, time_s: float) -> Body:
+        """The load after the changes up to ``time_s``."""
+        body = self.body
+        for event in self.events:
+            if event.at_s <= time_s:
+                body = event.applied_to(body)
+        return body
 
     @property
     def n(self) -> int:
@@ -416,6 +486,9 @@ class _BodyTable:
         check_bounds(self, where)
 
 
+_BODY_BOUNDS = bounds(_BodyTable)
+
+
 @dataclass(frozen=True)
 class _ContactsTable:
     points: tuple[Vec2, ...]
@@ -438,6 +511,7 @@ _TOP_LEVEL: dict[str, str | None] = {
     "floor": None,
     "run": None,
     "agent": None,
+    "events": None,
 }
 
 
@@ -649,7 +723,42 @@ def _parse(data: Any) -> Scenario:
             f" got {len(actuators.gains)}"
         )
     floor = from_table(Floor, data.get("floor", {}), "floor")
-    return Scenario(name, body, contacts, edges, sensors, run, agent, description, actuators, floor)
+    events = _parse_events(data.get("events", []), body, run)
+    return Scenario(
+        name, body, contacts, edges, sensors, run, agent, description, actuators, floor, events
+    )
+
+
+def _parse_events(array: Any, body: Body, run: RunSettings) -> tuple[LoadChange, ...]:
+    """``[[events]]``: each a :class:`LoadChange`, in increasing time within the run, each
+    leaving a load whose COM and moment pass the body's checks."""
+    if not isinstance(array, list):
+        raise ScenarioError(f"events: expected an array of tables ([[events]]), got {array!r}")
+    if len(array) > MAX_EVENTS:
+        raise ScenarioError(f"events: expected at most {MAX_EVENTS} load changes, got {len(array)}")
+    events = []
+    for i, table in enumerate(array):
+        where = f"events[{i}]"
+        event = from_table(LoadChange, table, where)
+        if event.com is not None:
+            _check_point(event.com, f"{where}.com", MAX_COORDINATE)
+        if event.at_s >= run.max_time_s:
+            raise ScenarioError(
+                f"{where}.at_s: expected a time before run.max_time_s ({run.max_time_s:g} s),"
+                f" got {event.at_s!r}"
+            )
+        if events and event.at_s <= events[-1].at_s:
+            raise ScenarioError(
+                f"{where}.at_s: expected a time after the previous event's"
+                f" ({events[-1].at_s:g} s), got {event.at_s!r}"
+            )
+        body = event.applied_to(body)
+        try:
+            _check_mass_distribution(body)
+        except ScenarioError as err:
+            raise ScenarioError(f"{where}: {err}") from None
+        events.append(event)
+    return tuple(events)
 
 
 def parse_scenario(data: Mapping[str, Any], source: str = "<scenario>") -> Scenario:
@@ -728,4 +837,11 @@ def scenario_to_toml(s: Scenario) -> str:
     agent = toml_fields(s.agent, only_changed=True)
     if agent:
         lines += ["", "[agent]", *agent]
+    for event in s.events:
+        lines += ["", "[[events]]", f"at_s = {event.at_s!r}"]
+        lines += [
+            f"{key} = {toml_value(getattr(event, key))}"
+            for key in ("mass", "moment", "com")
+            if getattr(event, key) is not None
+        ]
     return "\n".join(lines) + "\n"

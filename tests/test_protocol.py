@@ -293,6 +293,7 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         gain_centroid=pairs,
         gain_spread=numbers,
         instant=ticks,
+        epoch=st.integers(0, 10_000),
     )
     maybe = lambda strategy: st.none() | strategy  # noqa: E731
     # (xx, ρ √(xx yy), yy): a covariance whenever xx, yy ≥ 0; anything, from anything.
@@ -323,6 +324,8 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         relative_positions_cov=st.dictionaries(ids, covariances, max_size=6),
         drive_gain=maybe(st.floats(0.0, 100.0)),
         drive_gain_std=maybe(numbers),
+        epoch=st.integers(0, 10_000),
+        change_score=maybe(st.floats(0.0, 1e6)),
     )
     return st.one_of(
         st.builds(Measurement, robot=ids, tick=ticks, time_s=numbers, velocity=pairs, force=pairs),
@@ -533,8 +536,9 @@ def test_share_flow_count_must_match_its_bytes() -> None:
     rejects(Share, payload[:-1])  # a flow cut short
 
 
-ESTIMATES_FIXED = struct.Struct("<HqBqHBBBB")
-"""robot, tick, phase, phase_since, presence bits, neighbours, covariances, started, settled."""
+ESTIMATES_FIXED = struct.Struct("<HqBqHBBBBH")
+"""robot, tick, phase, phase_since, presence bits, neighbours, covariances, started, settled,
+epoch."""
 
 
 def _estimates_fixed(message: Estimates, **changes) -> bytes:
@@ -552,6 +556,7 @@ def _estimates_fixed(message: Estimates, **changes) -> bytes:
                 "covariances",
                 "started",
                 "settled",
+                "epoch",
             ),
             ESTIMATES_FIXED.unpack_from(payload, 3),
             strict=True,
@@ -575,7 +580,7 @@ def test_estimates_with_no_such_phase_are_refused(phase: int) -> None:
     assert "phase" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_FULL, phase=phase)))
 
 
-@pytest.mark.parametrize("present", [1 << 14, 1 << 15, 0xFFFF])
+@pytest.mark.parametrize("present", [1 << 15, 0xFFFF])
 def test_estimates_presence_bits_past_the_fields_are_refused(present: int) -> None:
     assert "presence" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_EMPTY, present=present)))
 

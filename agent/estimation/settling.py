@@ -22,6 +22,7 @@ every robot's estimates of that phase have settled (:mod:`agent.phase_machine`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -52,6 +53,12 @@ class SettleDetector:
         self.first_settled: int | None = None
         self._past: deque[tuple[float, ...]] = deque(maxlen=self.window + 1)
         self._stds: deque[float] = deque(maxlen=self.window + 1)
+
+    def fresh(self) -> SettleDetector:
+        """A detector like this one that has seen nothing."""
+        return SettleDetector(
+            self.window, self.tolerance, self.floor, self.uncertainty, self.iterated
+        )
 
     def update(
         self, value: Sequence[float], tick: int, std: float | None = None, scale: float = 0.0
@@ -131,6 +138,16 @@ class SettleDetectors:
                 SettleDetector(window, tolerance, uncertainty=uncertainty, iterated=i in iterated)
                 for i in range(6)
             )
+        )
+
+    def with_load_forgotten(self) -> SettleDetectors:
+        """These detectors with those of the load's own estimates (``Ĵ``, ``z_C``, ``m̂``)
+        started afresh, for a changed load."""
+        return dataclasses.replace(
+            self,
+            moment=self.moment.fresh(),
+            com_offset=self.com_offset.fresh(),
+            mass=self.mass.fresh(),
         )
 
     def first_settled(self) -> dict[int, int]:
