@@ -584,6 +584,11 @@ class AgentTuning:
     to the spin-up once the kick is over (it takes out the kick's drift; Steps 1–3 need only
     the turn), and applied alone once the team is done, so that the load comes to rest. 0
     leaves the load to coast, as the paper does."""
+    push_damping: float = bounded(0.0, 0, 1000, "N s/m")
+    """N s/m: with ``estimator = "robust"``, each robot adds ``−b ṗ̂_G`` to the push (the
+    centroid's velocity, which every robot estimates alike from Step 2): the COM's speed then
+    stays within about ``f / b`` and a drift dies out, whatever the load's mass; Steps 5 and 7
+    take the force as commanded. 0: the push alone."""
     change_threshold: float = bounded(6.0, 0.1, 1000, off=0.0)
     """With ``estimator = "robust"``: once done, the team probes the load, and a robot whose
     probe's fit of ``m`` or ``z_C`` differs from its estimate by more than this many standard

@@ -43,7 +43,10 @@ The force laws:
   pushes one way, and the load's speed grows without bound; on a bounded floor the push
   reverses on the agreed clock (``push_flip_s = T``): ``+f`` for ``T/2``, then ``−f`` and
   ``+f`` for ``T`` each, in turn (:meth:`PhaseMachine.push_sign`), so that the COM's velocity
-  swings about the one it had and it travels back and forth;
+  swings about the one it had and it travels back and forth; with ``push_damping = b`` each
+  robust robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity (which every robot
+  estimates alike), so that a light load's speed stays within about ``f/b`` and a heavy one's
+  drift dies out (Steps 5 and 7 take the force as commanded);
 - *done*: the damping ``−b ṗ_Ci`` alone brings the load to rest. With ``estimator =
   "robust"`` (and ``change_threshold`` > 0) the team keeps watching the load instead, in cycles
   on the agreed clock: a gap of ``monitor_gap_s`` in which each robot damps the COM's velocity,
@@ -134,6 +137,8 @@ class PhaseMachine:
         """``+1`` while the inertia phase speeds the turn up, ``−1`` while it brakes."""
         self._torque: dict[int, float] = {}
         """The team's torque (``±k w``) during each tick of the inertia phase."""
+        self._damping: dict[int, Vec2] = {}
+        """What this robot added to the common push during each tick (``push_damping``)."""
         self.moment_used: float | None = None
         """The ``Ĵ`` the push force was sized with (Steps 5 and 7 use it too)."""
         self.push: Vec2 = (0.0, 0.0)
@@ -297,7 +302,20 @@ class PhaseMachine:
 
     def _push_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         sign = self.push_sign(k)
-        return (sign * self.push[0], sign * self.push[1])
+        push = (sign * self.push[0], sign * self.push[1])
+        b = self.tuning.push_damping
+        if not (self.robust and b > 0.0):
+            return push
+        # ṗ_G = ṗ_Ci − ω Q z_i, z_i turned to t_k from the estimation instant.
+        omega = own.omega or 0.0
+        z = rotate(own.centroid, omega * (k - own.instant) * self.dt)
+        centroid_velocity = (velocity[0] + omega * z[1], velocity[1] - omega * z[0])
+        force = saturate(
+            (push[0] - b * centroid_velocity[0], push[1] - b * centroid_velocity[1]),
+            self.tuning.max_force,
+        )
+        self._damping[k] = (force[0] - push[0], force[1] - push[1])
+        return force
 
     @staticmethod
     def _changed(k: int, own: OwnEstimates) -> bool:
@@ -347,6 +365,15 @@ class PhaseMachine:
             return first
         return -first if (since - period // 2) // period % 2 == 0 else first
 
+    def mean_push_damping(self, first: int, last: int) -> Vec2:
+        """The mean of what each robot added to the common force over ticks ``first..last − 1``
+        (``push_damping``; zero without it)."""
+        added = [self._damping.get(t, (0.0, 0.0)) for t in range(first, last)]
+        return (
+            sum(a[0] for a in added) / len(added),
+            sum(a[1] for a in added) / len(added),
+        )
+
     def mean_push_sign(self, first: int, last: int) -> float:
         """The mean sign of the common force over ticks ``first..last − 1`` (Steps 5–7's
         input over an interval)."""
@@ -370,8 +397,9 @@ class PhaseMachine:
         return sum(torques) / len(torques)
 
     def forget(self, before: int) -> None:
-        """Drop the torque of tick ``before`` (too old to be asked for)."""
+        """Drop the torque and the damping of tick ``before`` (too old to be asked for)."""
         self._torque.pop(before, None)
+        self._damping.pop(before, None)
 
 
 def _never_ready(k: int, own: OwnEstimates) -> bool:

@@ -298,9 +298,10 @@ class EstimationPipeline:
             return
         alpha = self.angle - self.push_angle
         sign = phases.mean_push_sign(prev, e) if pushing else 0.0
+        added = phases.mean_push_damping(prev, e) if pushing else (0.0, 0.0)
         if pushing:
             self.observer.update(omega, sign, span)
-            self._update_com(omega, alpha, sign, span)
+            self._update_com(omega, alpha, sign, span, added)
         ref_offset = self.com.estimate
         if ref_offset is None:
             return
@@ -329,7 +330,7 @@ class EstimationPipeline:
             self.started[6] = e
             self.started[7] = e
         if self.robust:
-            self.mass_estimator.update(v_i, offset, self.angle, sign, span)
+            self.mass_estimator.update(v_i, offset, self.angle, sign, span, added=added)
         else:
             self.mass_estimator.update(self.com_velocity, sign, span)
         mass = self.mass_estimator.estimate
@@ -385,9 +386,11 @@ class EstimationPipeline:
             return None
         return mass_std / mass, cov
 
-    def _update_com(self, omega: float, alpha: float, sign: float, span: float) -> None:
+    def _update_com(
+        self, omega: float, alpha: float, sign: float, span: float, added: Vec2 = (0.0, 0.0)
+    ) -> None:
         if self.robust:
-            self.com.update(alpha, sign, span)
+            self.com.update(alpha, sign, span, added=added)
         else:
             self.com.update(omega, alpha, sign, span)
 

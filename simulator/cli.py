@@ -533,6 +533,7 @@ def _bench_noise(args: argparse.Namespace) -> int:
     from simulator.benchmark import PAPER_SCENARIO
     from simulator.generate import generate_scenario
     from simulator.noise_bench import (
+        GENERATED_PUSH_DAMPING,
         NoiseSettings,
         format_noise_report,
         format_sweep,
@@ -578,6 +579,8 @@ def _bench_noise(args: argparse.Namespace) -> int:
         )
 
     settings = dataclasses.replace(NoiseSettings(), seeds=seeds)
+    if args.generated is not None:
+        settings = dataclasses.replace(settings, push_damping=GENERATED_PUSH_DAMPING)
     if args.ideal_drives:
         settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
     if args.sweep:

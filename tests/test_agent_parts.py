@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from agent.agent import Agent
-from agent.config import AgentConfig, AgentTuning
+from agent.config import AgentConfig, AgentTuning, Estimators
 from agent.estimation.excitation import kick_force, spin_up_force
 from agent.estimation.geometry import Vec2, cross, rotate
 from agent.estimation.settling import SettleDetectors
@@ -295,6 +295,26 @@ def test_the_push_reverses_on_the_agreed_clock():
     one_way = machine(push_flip_s=0.0, push_min_force=2.0)
     enter(one_way, Phase.PUSH, 50, own)
     assert {one_way.push_sign(k) for k in range(50, 500)} == {1.0}
+
+
+def test_the_robust_push_damps_the_centroids_velocity_and_says_by_how_much():
+    """``push_damping = b``: each robot adds ``−b ṗ̂_G``, ``ṗ̂_G = ṗ_Ci − ω Q z_i``, to the
+    common force, and the pipeline's fits are told what was added, tick by tick."""
+    m = machine(
+        estimator=Estimators.ROBUST, push_force=2.0, push_damping=2.0, push_direction=(0.0, 1.0)
+    )
+    own = Own(moment=1.0, omega=0.5, centroid=(0.4, 0.0), instant=50)
+    enter(m, Phase.PUSH, 50, own)
+    # ṗ̂_G = (0.1 + 0.5 · 0, 0.2 − 0.5 · 0.4) = (0.1, 0)
+    assert m.force(50, own, (0.1, 0.2)) == pytest.approx((-0.2, 2.0))
+    # at rest at t_51, z_i turned by ω Δt since the instant: ṗ̂_G = −ω Q z_i ≈ (0.001, −0.2)
+    assert m.force(51, own, (0.0, 0.0)) == pytest.approx((-0.002, 2.4), abs=1e-5)
+    assert m.mean_push_damping(50, 51) == pytest.approx((-0.2, 0.0))
+    assert m.mean_push_damping(50, 52) == pytest.approx((-0.101, 0.2), abs=1e-5)
+    assert m.mean_push_damping(60, 61) == (0.0, 0.0)  # no force commanded then: nothing added
+    paper = machine(push_damping=2.0, push_min_force=2.0, push_direction=(0.0, 1.0))
+    enter(paper, Phase.PUSH, 50, own)
+    assert paper.force(50, own, (0.1, 0.2)) == pytest.approx((0.0, 2.0))  # robust only
 
 
 def test_done_brakes_and_halted_applies_no_force():

@@ -208,7 +208,12 @@ def test_every_robust_estimator_has_the_common_shape() -> None:
     ):
         cls = type(est)
         assert isinstance(est, Estimator), cls
-        assert list(inspect.signature(cls.update).parameters)[-1] == "dt", cls
+        positional = [
+            name
+            for name, p in inspect.signature(cls.update).parameters.items()
+            if p.kind is p.POSITIONAL_OR_KEYWORD
+        ]
+        assert positional[-1] == "dt", cls
         assert est.estimate is None and est.covariance is None, cls
 
 
@@ -363,6 +368,40 @@ def test_com_fit_with_a_reversing_push() -> None:
             theta += omega * DT / fine
         fit.update(theta, sign, DT)
     assert math.dist(fit.estimate, c) < 5e-5
+
+
+def test_mass_and_com_fits_take_a_damped_push() -> None:
+    """Every robot adds ``a = −b ṗ_G`` to the reversing push (``push_damping``): the COM's speed
+    stays within ``f / b``, and both fits, told ``a`` per tick, stay exact."""
+    n, mass, moment, force, b = 4, 2.0, 3.0, (0.0, 3.0), 2.0
+    c, offset0, v0 = (-0.12, 0.05), (1.2, -0.7), [0.3, -0.2]
+    commanded, _ = _reversing_push(6.0, 1.0)
+    mass_fit, com_fit = MassFit(n, force), ComFit(n, moment, force)
+    com_fit.update(0.0, 1.0, DT)
+    velocity, theta, omega, fine, fastest = list(v0), 0.0, 0.6, 100, 0.0
+    previous = (0.0, 0.0)
+    for k, sign in enumerate(commanded):
+        offset = rotate(offset0, theta)
+        contact = (velocity[0] - omega * offset[1], velocity[1] + omega * offset[0])
+        # ṗ_G = ṗ_C + ω Q z_C, as every robot estimates it from Step 2 (here exactly)
+        zc = rotate(c, theta)
+        added = (-b * (velocity[0] - omega * zc[1]), -b * (velocity[1] + omega * zc[0]))
+        mass_fit.update(contact, offset, theta, commanded[k - 1] if k else 1.0, DT, added=previous)
+        if k:
+            com_fit.update(theta, commanded[k - 1], DT, added=previous)
+        total = (sign * force[0] + added[0], sign * force[1] + added[1])
+        for _ in range(fine):
+            zc = rotate(c, theta)
+            torque = n * (-zc[1] * total[0] + zc[0] * total[1])
+            omega += torque / moment * DT / fine
+            theta += omega * DT / fine
+            velocity[0] += n * total[0] / mass * DT / fine
+            velocity[1] += n * total[1] / mass * DT / fine
+        fastest = max(fastest, math.hypot(*velocity))
+        previous = added
+    assert fastest < 1.2 * math.hypot(*force) / b  # undamped: n f T / 2m = 3 m/s
+    assert abs(mass_fit.estimate - mass) / mass < 2e-3
+    assert math.dist(com_fit.estimate, c) < 1e-3
 
 
 # ------------------------------------------------------------------------------ drive gain

@@ -11,7 +11,8 @@ Integrating twice from the push's first instant ``t₀``,
 
     θ(t) = θ₀ + ω₀ (t − t₀) + Ψ(t)ᵀ c,      Ψ(t) = ∫_{t₀}^{t} ∫_{t₀}^{s} φ dr ds,
 
-linear in ``(θ₀, ω₀, c_x, c_y)`` (with the drives' lag ``τ_d`` from Step 4,
+linear in ``(θ₀, ω₀, c_x, c_y)`` (a force ``a(t)`` that every robot adds to the push,
+``push_damping``'s, adds ``(n/J) R(−α) Qᵀ a`` to ``φ``; with the drives' lag ``τ_d`` from Step 4,
 ``Ψ − τ_d ∫φ + τ_d² φ`` in place of ``Ψ``, as in :mod:`agent.estimation.mass_fit`): least
 squares on the angle itself (tracked from the arc fits, :mod:`agent.estimation.arc_fit`), never
 on a differentiated or filtered ω. Over an
@@ -40,6 +41,7 @@ class ComFit(RunFit):
     ):
         super().__init__(4, forgetting)  # rows [1, t − t₀, Ψ_x, Ψ_y] (θ₀, ω₀, c_x, c_y) = α
         k = n / moment
+        self.k = k
         self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
         self.lag = lag
         self.started = False
@@ -53,15 +55,18 @@ class ComFit(RunFit):
         """``φ = (n/J) R(−α) Qᵀ f``."""
         return rotate(self.base, -alpha)
 
-    def update(self, alpha: float, sign: float, dt: float) -> None:
+    def update(self, alpha: float, sign: float, dt: float, *, added: Vec2 = (0.0, 0.0)) -> None:
         """Feed the rotation ``α`` since the push began, at the end of an interval ``dt``
-        during which the team pushed with the mean sign ``sign`` (the first call, at the
-        push's first instant, starts)."""
+        during which the team pushed with the mean sign ``sign`` and each robot added the
+        mean force ``added`` (the first call, at the push's first instant, starts)."""
+        k = self.k
+        extra = (k * added[1], -k * added[0])  # (n/J) Qᵀ a
         if self.started:
             p0 = self.regressor(self._alpha)
             phi = self.regressor(alpha)
-            p0 = (sign * p0[0], sign * p0[1])
-            phi = (sign * phi[0], sign * phi[1])
+            e0, e1 = rotate(extra, -self._alpha), rotate(extra, -alpha)
+            p0 = (sign * p0[0] + e0[0], sign * p0[1] + e0[1])
+            phi = (sign * phi[0] + e1[0], sign * phi[1] + e1[1])
             once, twice = self._once, self._twice
             h = 0.5 * dt * arc_factor(alpha - self._alpha)
             dd = dt * dt
@@ -75,8 +80,17 @@ class ComFit(RunFit):
         self._alpha = alpha
         (sx, sy), (ox, oy), lag = self._twice, self._once, self.lag
         px, py = self.regressor(alpha)
-        lag2 = lag * lag * sign
-        self.fit.add((1.0, self.t, sx - lag * ox + lag2 * px, sy - lag * oy + lag2 * py), alpha)
+        ex, ey = rotate(extra, -alpha)
+        lag2, lagged = lag * lag * sign, lag * lag
+        self.fit.add(
+            (
+                1.0,
+                self.t,
+                sx - lag * ox + lag2 * px + lagged * ex,
+                sy - lag * oy + lag2 * py + lagged * ey,
+            ),
+            alpha,
+        )
         self._solve()
 
     @property

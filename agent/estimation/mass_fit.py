@@ -7,9 +7,11 @@ accelerates at ``n s f / m`` (Step 7), so from the mass fit's first instant ``t�
     p_C(t) − p_C(t₀) = v₀ (t − t₀) + (n f / m) (S(t) − τ_d Σ(t) + τ_d² s(t)),
     Σ(t) = ∫_{t₀}^{t} s dt,   S(t) = ∫_{t₀}^{t} Σ dt,
 
-linear in ``(v₀ₓ, v₀ᵧ, 1/m)`` with one row per axis; ``τ_d`` is the drives' lag, which
-Step 4's fit found (:attr:`~agent.estimation.inertia_fit.InertiaFit.lag`): a drive with a
-first-order lag applies ``s/(1 + τ_d p)`` (``p`` = d/dt), whose double integral is
+linear in ``(v₀ₓ, v₀ᵧ, 1/m)`` with one row per axis (a force ``a(t)`` that every robot adds
+to the push, ``push_damping``'s, adds ``n ∫∫a`` to the last regressor, lagged alike);
+``τ_d`` is the drives' lag, which Step 4's fit found
+(:attr:`~agent.estimation.inertia_fit.InertiaFit.lag`): a drive with a first-order lag
+applies ``s/(1 + τ_d p)`` (``p`` = d/dt), whose double integral is
 ``S − τ_d Σ + τ_d² s/(1 + τ_d p)``; the last term's lag is left out (it only matters for a
 tick after each reversal). A robot measures the displacement without
 differentiating anything: ``p_C = p_Ci − o`` with ``o = p_Ci − p_C = z_i + z_C`` (Steps 2 and
@@ -43,7 +45,11 @@ class MassFit(ReciprocalFit):
 
     def __init__(self, n: int, force: Vec2, forgetting: float = 1.0, lag: float = 0.0):
         super().__init__(3, forgetting)  # rows [t, 0, n f_x (S − τ_d Σ)], [0, t, n f_y (…)]
+        self.n = n
         self.total_force = (n * force[0], n * force[1])
+        self._added_once: Vec2 = (0.0, 0.0)
+        self._added_twice: Vec2 = (0.0, 0.0)
+        """``∫a dt`` and ``∫∫a`` of the force ``a`` each robot added to the push."""
         self.lag = lag
         self.started = False
         self._once = 0.0
@@ -55,10 +61,20 @@ class MassFit(ReciprocalFit):
         """``∫ṗ_Ci dt`` since the first sample."""
         self._angle0 = 0.0
 
-    def update(self, velocity: Vec2, offset: Vec2, angle: float, sign: float, dt: float) -> None:
+    def update(
+        self,
+        velocity: Vec2,
+        offset: Vec2,
+        angle: float,
+        sign: float,
+        dt: float,
+        *,
+        added: Vec2 = (0.0, 0.0),
+    ) -> None:
         """Feed the robot's contact velocity ``ṗ_Ci``, the offset ``o = p_Ci − p_C`` and the
         load's rotation ``angle`` at the end of an interval ``dt`` of pushing with the mean
-        sign ``sign`` (the first call starts)."""
+        sign ``sign`` and the mean force ``added`` each robot added to it (the first call
+        starts)."""
         if not self.started:
             self.started = True
             self._velocity, self._angle0 = velocity, angle
@@ -73,11 +89,20 @@ class MassFit(ReciprocalFit):
         self.t += dt
         self._twice += dt * self._once + 0.5 * sign * dt * dt
         self._once += sign * dt
+        (ox, oy), (tx, ty) = self._added_once, self._added_twice
+        self._added_twice = (
+            tx + dt * ox + 0.5 * added[0] * dt * dt,
+            ty + dt * oy + 0.5 * added[1] * dt * dt,
+        )
+        self._added_once = (ox + added[0] * dt, oy + added[1] * dt)
         back = rotate(offset, self._angle0 - angle)
         dx = self._travel[0] - (offset[0] - back[0])
         dy = self._travel[1] - (offset[1] - back[1])
-        t, (fx, fy) = self.t, self.total_force
-        pushed = self._twice - self.lag * self._once + self.lag * self.lag * sign
-        self.fit.add((t, 0.0, pushed * fx), dx)
-        self.fit.add((0.0, t, pushed * fy), dy)
+        t, (fx, fy), lag = self.t, self.total_force, self.lag
+        pushed = self._twice - lag * self._once + lag * lag * sign
+        (ox, oy), (tx, ty) = self._added_once, self._added_twice
+        ax = self.n * (tx - lag * ox + lag * lag * added[0])
+        ay = self.n * (ty - lag * oy + lag * lag * added[1])
+        self.fit.add((t, 0.0, pushed * fx + ax), dx)
+        self.fit.add((0.0, t, pushed * fy + ay), dy)
         self._solve()
