@@ -174,6 +174,8 @@ class AgentNode:
         self.late = 0
         self.next_tick = 0
         self.last_phase: Phase | None = None
+        self.alarmed = False
+        """Whether this robot's probes have found the load changed (logged once per epoch)."""
         self.last_command: Command | None = None
         self.recent_shares: deque[Share] = deque(maxlen=2)
         self.last_sent = time.monotonic()
@@ -270,6 +272,16 @@ class AgentNode:
         self.last_command = command
         if k % self.config.report_every == 0 or agent.phase >= Phase.DONE:
             self.port.report(agent.estimates())
+        if agent.pipeline.changed and not self.alarmed:
+            log.warning(
+                "robot %d: tick %d: the load has changed (a probe scored %.1f standard"
+                " deviations, above %g); asking the team to estimate it again",
+                self.robot,
+                k,
+                agent.pipeline.change_score,
+                agent.pipeline.tuning.change_threshold,
+            )
+        self.alarmed = agent.pipeline.changed
         if agent.phase != self.last_phase or k % 100 == 0:
             if agent.phase != self.last_phase:
                 epoch = agent.epoch

@@ -19,6 +19,7 @@ METADATA_NAME = "heft.load"
 """The MCAP metadata record holding a recording's :class:`LoadGeometry`."""
 MAX_VERTICES = 1000
 MAX_COORDINATE = 1000.0
+MAX_END_TICK = 10**9
 
 
 class GeometryError(ValueError):
@@ -38,6 +39,9 @@ class LoadGeometry:
     """Undirected edges ``(i, j)``, ``i < j``."""
     period_s: float
     """The sensor period: tick ``k`` is at ``k · period_s``."""
+    end_tick: int = 0
+    """The first tick at which the run may end (the scenario's load changes and hold:
+    :attr:`simulator.scenario.Scenario.end_tick`); the final instant is not before it."""
 
     @classmethod
     def from_scenario(cls, scenario) -> LoadGeometry:
@@ -49,6 +53,7 @@ class LoadGeometry:
             outline=tuple((x - cx, y - cy) for x, y in scenario.body.polygon),
             edges=tuple(sorted((min(e), max(e)) for e in scenario.edges)),
             period_s=scenario.period_s,
+            end_tick=scenario.end_tick,
         )
 
     def world_outline(self, com: Vec2, angle: float) -> list[Vec2]:
@@ -63,6 +68,7 @@ class LoadGeometry:
             "outline": json.dumps(self.outline),
             "edges": json.dumps(self.edges),
             "period_s": repr(self.period_s),
+            "end_tick": str(self.end_tick),
         }
 
     @classmethod
@@ -75,6 +81,7 @@ class LoadGeometry:
             edges = tuple((int(i), int(j)) for i, j in json.loads(data["edges"]))
             period_s = float(data["period_s"])
             name = str(data["name"])[:200]
+            end_tick = int(data.get("end_tick", "0"))  # (not in older recordings)
         except (KeyError, TypeError, ValueError) as err:
             raise GeometryError(f"{METADATA_NAME}: malformed ({err})") from None
         if not 2 <= n <= MAX_ROBOTS:
@@ -87,4 +94,6 @@ class LoadGeometry:
             raise GeometryError(f"{METADATA_NAME}: edges are not those of robots 1..{n}")
         if not (math.isfinite(period_s) and 0.0001 <= period_s <= 1.0):
             raise GeometryError(f"{METADATA_NAME}: period_s = {period_s} is outside range")
-        return cls(name, n, outline, edges, period_s)
+        if not 0 <= end_tick <= MAX_END_TICK:
+            raise GeometryError(f"{METADATA_NAME}: end_tick = {end_tick} is outside range")
+        return cls(name, n, outline, edges, period_s, end_tick)

@@ -285,12 +285,13 @@ class TeamState:
     # ------------------------------------------------------------------ the final instant
     @property
     def done_instant(self) -> int | None:
-        """The first instant at which every robot was done: ``max_i phase_since_i`` (as the
-        launcher finds it), or None before every robot is done."""
+        """The first instant at which every robot was done: ``max_i phase_since_i``, not before
+        the scenario's end (as the launcher finds it), or None before every robot is done."""
         n = self.n
         if not n or not self.done:
             return None
-        return max(self.robots[i].estimates.phase_since for i in range(1, n + 1))
+        end = self.geometry.end_tick if self.geometry is not None else 0
+        return max(end, *(self.robots[i].estimates.phase_since for i in range(1, n + 1)))
 
     def _conclude(self, tick: int) -> None:
         """Look for the final table after a done estimate or a truth of ``tick`` arrived.
@@ -298,13 +299,18 @@ class TeamState:
         The final instant is the first complete instant (every robot's done estimates and the
         truth) at or after :attr:`done_instant`, as the launcher takes it: a message of the
         done instant itself that a congested link dropped leaves the next complete one, and
-        a complete instant that arrives late replaces a later one."""
+        a complete instant that arrives late replaces a later one. A team done again after a
+        restart for a changed load (a later done instant) gets a new final table."""
         instant = self.done_instant
         if instant is None:
             return
         final = self.final
         if final is not None and final["tick"] == instant:
             return
+        if final is not None and final["tick"] < instant:
+            # The team was done, then restarted for a changed load and is done again.
+            self.final = final = None
+            self._scanned = False
         if final is None and not self._scanned:
             self._scanned = True  # the done instant just became known: what came before it
             ticks = sorted(t for t in self.truths if t >= instant)
@@ -335,6 +341,8 @@ class TeamState:
         for i, est in sorted(robots.items()):
             row = {
                 "phase": est.phase.label,
+                "epoch": est.epoch,
+                "change_score": est.change_score,
                 "tick": est.tick,
                 "mass": est.mass,
                 "moment": est.moment,
@@ -670,7 +678,7 @@ class TeamState:
 
 
 _PAGE_ROBOT = ("phase", "tick", "segments", "alive")
-_PAGE_ROW = ("phase", "mass", "moment", "contact_to_com", "errors")
+_PAGE_ROW = ("phase", "epoch", "change_score", "mass", "moment", "contact_to_com", "errors")
 _NOT_ON_PAGE = ("truth", "plant", "received", "rejected")
 
 

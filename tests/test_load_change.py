@@ -13,6 +13,8 @@ import pytest
 from agent.coordination import PhaseBarrier
 from agent.estimation.load_change import ProbeFit
 from agent.protocol import Phase, Share, decode, encode
+from dashboard.geometry import LoadGeometry
+from dashboard.state import TeamState
 from simulator.inprocess import run_inprocess
 from simulator.plant import Plant
 from simulator.results import format_table, load_changes, results_dict
@@ -217,6 +219,14 @@ def test_a_changed_load_is_noticed_within_5_s_and_estimated_again(seed, change) 
         assert math.dist(est.contact_to_com, truth.contact_to_com[est.robot - 1]) < 0.04
     assert results_dict(outcome)["floor"]["within"]
     assert "restarted" in format_table(outcome)
+    # The dashboard, fed the run, ends on the same final instant: the one after the restart.
+    state = TeamState("changing", LoadGeometry.from_scenario(outcome.scenario))
+    for sample in [*outcome.history, outcome.final]:
+        state.ingest(sample.truth, sample.truth.time_s)
+        for est in sample.estimates.values():
+            state.ingest(est, sample.truth.time_s)
+    assert state.final is not None and state.final["tick"] == outcome.final.truth.tick
+    assert {row["epoch"] for row in state.final["robots"].values()} == {1}
 
 
 def test_an_unchanged_load_raises_no_alarm_while_it_is_watched() -> None:

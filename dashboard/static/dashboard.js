@@ -554,7 +554,9 @@ function drawTable(scene) {
     const e = row.errors || {};
     const c = row.contact_to_com ? `p̂_C − p_C${robot} = (${fmt(row.contact_to_com[0], 4)}, ${fmt(row.contact_to_com[1], 4)}) m` : "";
     rows.push(`<tr title="${c}"><td><span class="swatch" style="background:${colour(Number(robot))}"></span>${robot}</td>`
-      + `<td style="color:${PHASE_COLOURS[row.phase] || "inherit"}">${row.phase}</td>`
+      + `<td style="color:${PHASE_COLOURS[row.phase] || "inherit"}"`
+      + ` title="probe score: ${row.change_score == null ? "–" : fmt(row.change_score, 1) + " σ"}">`
+      + `${row.phase}${row.epoch ? ` <span class="epoch">(load changed: epoch ${row.epoch})</span>` : ""}</td>`
       + `<td>${fmt(row.mass, 4)}</td><td>${fmt(row.moment, 4)}</td>`
       + `<td>${fmt(e.mass_pct, 3)}</td><td>${fmt(e.moment_pct, 3)}</td>`
       + `<td>${fmt(e.contact_to_com_mm, 2)}</td><td>${fmt(e.z_ij_mm, 2)}</td></tr>`);
