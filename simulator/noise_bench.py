@@ -85,7 +85,7 @@ class NoiseSettings:
     """N s/m: the robust estimators' damping of the centroid's velocity during the push
     (``heft bench --noise --generated`` sets :data:`GENERATED_PUSH_DAMPING`). The paper's
     scenario does without: its push is sized for its load, and the damping takes from the
-    mass's signal (m 0.76 % against 0.58 % with it, over the benchmark's seeds)."""
+    mass's signal (``heft bench --noise``: m 0.76 % with it, 0.58 % without)."""
 
 
 @dataclass

@@ -20,9 +20,9 @@ At the probe's end the robot tests both against what it published (:meth:`ProbeF
 
     d_m = |κ − 1| / √(σ_κ² + (σ_m / m̂)²),    d_C = √(δᵀ (Σ_δ + Σ_o)⁻¹ δ),
 
-with the fit's ``σ̂² M⁻¹`` (the rows' errors are the odometry's and ω's, white) and the
-published standard deviation of ``m̂`` and covariance of ``contact_to_com`` (``−ô``); the score
-is ``max(d_m, d_C)``. Above ``change_threshold`` the load has changed.
+with the fit's ``σ̂² M⁻¹`` (the rows taken as independent: their errors are the odometry's
+and ω's) and the published standard deviation of ``m̂`` and covariance of ``contact_to_com``
+(``−ô``); the score is ``max(d_m, d_C)``. Above ``change_threshold`` the load has changed.
 """
 
 from __future__ import annotations
