@@ -591,9 +591,9 @@ class AgentTuning:
     take the force as commanded. 0: the push alone."""
     change_threshold: float = bounded(6.0, 0.1, 1000, off=0.0)
     """With ``estimator = "robust"``: once done, the team probes the load, and a robot whose
-    probe's fit of ``m`` or ``z_C`` differs from its estimate by more than this many standard
-    deviations calls the load changed: the team estimates it again
-    (:mod:`agent.estimation.load_change`). 0: no probes; the load comes to rest."""
+    probe finds the mass or the COM off its estimates by more than this many standard
+    deviations (its score, :mod:`agent.estimation.load_change`) calls the load changed: the
+    team estimates it again. 0: no probes; the load comes to rest."""
     monitor_gap_s: float = bounded(1.0, 0, 60, "s", min_ticks=1)
     """s: before each probe, the team damps the COM's velocity for this long."""
     probe_s: float = bounded(2.0, 0, 60, "s", min_ticks=4)

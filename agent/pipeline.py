@@ -37,7 +37,7 @@ from agent.estimation.com_observer import ComObserver
 from agent.estimation.com_regression import ComRegression
 from agent.estimation.com_velocity import com_velocity
 from agent.estimation.drive_gain import DriveGain
-from agent.estimation.geometry import Vec2, rotate
+from agent.estimation.geometry import Vec2, rotate, turned_covariance
 from agent.estimation.inertia import InertiaEstimator
 from agent.estimation.inertia_fit import InertiaFit
 from agent.estimation.load_change import ProbeFit
@@ -521,7 +521,7 @@ class EstimationPipeline:
             cov = self.edges[j].covariance
             if cov is not None:
                 turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
-                edges[j] = _packed(_turned(cov, turned))
+                edges[j] = _packed(turned_covariance(cov, turned))
         # The gains' corrections: every robot's gain taken as uncertain as this one's, ``σ_g``;
         # ḡ and q / (w/n) then have about σ_g / √n relative, and h = Σ g_i z_i / n has
         # σ_g² w / (2 n²) per axis.
@@ -549,7 +549,7 @@ class EstimationPipeline:
         com_cov = self.com.covariance if self.com is not None else None
         if contact_to_com is not None and edges and com_cov is not None:
             alpha = self.angle - self.push_angle
-            (a, b), (_, d) = _turned(com_cov, alpha)
+            (a, b), (_, d) = turned_covariance(com_cov, alpha)
             c = self.com.com_offset(alpha)
             rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
             count = len(edges)
@@ -560,19 +560,6 @@ class EstimationPipeline:
             scale = PUBLISHED_VARIANCE["contact_to_com"]
             out["contact_to_com_cov"] = (scale * xx, scale * xy, scale * yy)
         return out
-
-
-def _turned(cov, angle: float):
-    """``R C Rᵀ`` for a 2×2 covariance ``C`` (nested pairs) and ``R`` the rotation by
-    ``angle``."""
-    (a, b), (_, d) = cov
-    if angle == 0.0:
-        return ((a, b), (b, d))
-    c, s = math.cos(angle), math.sin(angle)
-    xx = c * c * a - 2 * c * s * b + s * s * d
-    xy = c * s * (a - d) + (c * c - s * s) * b
-    yy = s * s * a + 2 * c * s * b + c * c * d
-    return ((xx, xy), (xy, yy))
 
 
 def _packed(cov) -> tuple[float, float, float]:

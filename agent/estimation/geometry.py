@@ -34,6 +34,19 @@ def rotate(v: Vec2, angle: float) -> Vec2:
     return (c * v[0] - s * v[1], s * v[0] + c * v[1])
 
 
+def turned_covariance(cov, angle: float):
+    """``R C Rᵀ`` for a 2×2 covariance ``C`` (nested pairs) and ``R`` the rotation by
+    ``angle``: the covariance of a vector turned by ``angle``."""
+    (a, b), (_, d) = cov
+    if angle == 0.0:
+        return ((a, b), (b, d))
+    c, s = math.cos(angle), math.sin(angle)
+    xx = c * c * a - 2 * c * s * b + s * s * d
+    xy = c * s * (a - d) + (c * c - s * s) * b
+    yy = s * s * a + 2 * c * s * b + c * c * d
+    return ((xx, xy), (xy, yy))
+
+
 def angle_between(a: Vec2, b: Vec2) -> float:
     """The signed angle in ``(-π, π]`` that turns the direction of ``a`` onto that of ``b``."""
     return math.atan2(cross(a, b) + 0.0, dot(a, b))  # + 0.0: a -0.0 cross would give -π

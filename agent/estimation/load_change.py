@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-from agent.estimation.geometry import Vec2
+from agent.estimation.geometry import Vec2, rotate, turned_covariance
 from agent.estimation.least_squares import LeastSquares, Solution
 
 Cov2 = tuple[float, float, float]
@@ -82,12 +82,11 @@ class ProbeFit:
         d_m = abs(kappa - 1.0) / math.sqrt(cov[2][2] + mass_rel_std**2)
         # δ₀ and its covariance turned to the last instant, where Σ_o is given.
         turn = self.angle - self.angle0
-        c, s = math.cos(turn), math.sin(turn)
-        x, y = c * dx - s * dy, s * dx + c * dy
-        a, b, d = cov[3][3], cov[3][4], cov[4][4]
-        xx = c * c * a - 2 * c * s * b + s * s * d + offset_cov[0]
-        xy = c * s * (a - d) + (c * c - s * s) * b + offset_cov[1]
-        yy = s * s * a + 2 * c * s * b + c * c * d + offset_cov[2]
+        x, y = rotate((dx, dy), turn)
+        (xx, xy), (_, yy) = turned_covariance(
+            ((cov[3][3], cov[3][4]), (cov[4][3], cov[4][4])), turn
+        )
+        xx, xy, yy = xx + offset_cov[0], xy + offset_cov[1], yy + offset_cov[2]
         det = xx * yy - xy * xy
         if det <= 0.0:
             return None
