@@ -4,14 +4,15 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-quick hil lint bench clean
+.PHONY: demo test test-quick hil multihost lint bench clean
 
 demo: $(STAMP)  ## The paper's scenario, 4 robot processes over Zenoh in real time: table, JSON, plots.
 	$(BIN)/heft demo --out out/paper-results.json --plot out/plots
 
-test: $(STAMP) lint  ## Lint, then run the whole test suite (the hardware-in-the-loop part on vcan).
-	$(BIN)/python -m pytest -q -m "not hil"
+test: $(STAMP) lint  ## Lint, then the whole test suite (hardware-in-the-loop on vcan, then multi-host).
+	$(BIN)/python -m pytest -q -m "not hil and not multihost"
 	$(MAKE) --no-print-directory hil
+	$(MAKE) --no-print-directory multihost
 
 hil: $(STAMP)  ## The hardware-in-the-loop tests, on real vcan (in User-Mode Linux if this kernel has none).
 	@if $(BIN)/heft vcan --check; then \
@@ -20,8 +21,11 @@ hil: $(STAMP)  ## The hardware-in-the-loop tests, on real vcan (in User-Mode Lin
 	  $(BIN)/python -m pytest -q -m hil -rs; \
 	fi
 
+multihost: $(STAMP)  ## The team across network namespaces as hosts, over mutual TLS (needs root).
+	$(BIN)/python -m pytest -q -s -m multihost -p no:cacheprovider
+
 test-quick: $(STAMP) lint  ## Lint, then the tests not marked slow (no Zenoh, no processes).
-	$(BIN)/python -m pytest -q -m "not slow and not hil"
+	$(BIN)/python -m pytest -q -m "not slow and not hil and not multihost"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

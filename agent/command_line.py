@@ -12,7 +12,11 @@ takes the same three options, added by :func:`add_zenoh_options` and read back b
 - ``--listen ENDPOINT`` (repeatable): where to accept connections,
 - ``--zenoh-config FILE``: a Zenoh JSON5 config file (e.g. TLS, access control) to start from;
   the project's settings are applied on top of it (mode, these endpoints, multicast scouting
-  off, shared memory off, lease).
+  off, shared memory off, lease),
+
+and the mutual-TLS ones, all three or none (see :mod:`agent.certificates`):
+``--tls-root-ca FILE``, ``--tls-certificate FILE``, ``--tls-private-key FILE``, and
+``--allow-plain`` (plain ``tcp``/``udp`` to addresses other than loopback).
 
 ``--config`` is left to each command for its own file (``heft agent --config robot.toml``).
 """
@@ -169,13 +173,15 @@ def setup_logging() -> None:
 def add_zenoh_options(
     parser: argparse.ArgumentParser, connect: str, listen: str, config: str = "none"
 ) -> None:
-    """Add ``--connect``, ``--listen`` and ``--zenoh-config`` to ``parser`` as the group
-    "Zenoh"; ``connect``, ``listen`` and ``config`` say, for the help, what is used without
-    them."""
+    """Add ``--connect``, ``--listen``, ``--zenoh-config``, the ``--tls-...`` options and
+    ``--allow-plain`` to ``parser`` as the group "Zenoh"; ``connect``, ``listen`` and
+    ``config`` say, for the help, what is used without them."""
     group = parser.add_argument_group(
         "Zenoh",
         "Multicast scouting is always off: every endpoint is explicit, like\n"
-        "tcp/192.168.10.1:7447 (tcp, udp, quic or tls).",
+        "tls/192.168.10.1:7447 (tcp, udp, quic or tls). Plain tcp/udp is for loopback\n"
+        "(127.0.0.1) only, unless --allow-plain: across a network use tls with the team's\n"
+        "certificates (heft deploy certs; deploy/README.md).",
     )
     group.add_argument(
         "--connect",
@@ -196,24 +202,69 @@ def add_zenoh_options(
         " endpoints, scouting, shared memory and lease are still set as above"
         f" (default: {config})",
     )
+    for option, what in TLS_OPTIONS.items():
+        group.add_argument(
+            option,
+            metavar="FILE",
+            help=f"mutual TLS: {what} (PEM); the three go together",
+        )
+    group.add_argument(
+        "--allow-plain",
+        action="store_true",
+        default=None,
+        help="allow plain tcp/udp endpoints to addresses other than loopback: unencrypted,"
+        " open to anyone on the network (default: [zenoh] allow_plain, false)",
+    )
+
+
+TLS_OPTIONS = {
+    "--tls-root-ca": "the team's CA certificate",
+    "--tls-certificate": "this process's certificate",
+    "--tls-private-key": "its private key",
+}
+TLS_KEYS = {
+    "--tls-root-ca": "root_ca",
+    "--tls-certificate": "certificate",
+    "--tls-private-key": "private_key",
+}
 
 
 def zenoh_settings(args: argparse.Namespace, base: ZenohSettings) -> ZenohSettings:
     """``base`` with the options of :func:`add_zenoh_options` applied (each replaces what
     ``base`` had), checked; a :class:`UsageError` naming the option if something is wrong."""
     changes: dict[str, object] = {}
+    names: dict[str, str] = {}  # the options that gave a key, for the error messages
+    allow_plain = getattr(args, "allow_plain", None)
     try:
+        if allow_plain:
+            changes["allow_plain"] = names["allow_plain"] = True
+        plain_ok = base.allow_plain or bool(allow_plain)
         for option, key in (("--connect", "connect"), ("--listen", "listen")):
             endpoints = getattr(args, key)
             if endpoints:
                 for endpoint in endpoints:
                     ZenohSettings.check_endpoint(endpoint, option)
+                    if not plain_ok:
+                        ZenohSettings.check_plain(endpoint, option, "give --allow-plain")
                 changes[key] = tuple(endpoints)
+                names[key] = option
         if args.zenoh_config is not None:
             ZenohSettings.check_config_file(args.zenoh_config, "--zenoh-config")
             changes["config_file"] = args.zenoh_config
+            names["config_file"] = "--zenoh-config"
+        for option, key in TLS_KEYS.items():
+            path = getattr(args, option[2:].replace("-", "_"), None)
+            if path is not None:
+                ZenohSettings.check_config_file(path, option)
+                changes[key] = path
+                names[key] = option
+        if any(key in names for key in TLS_KEYS.values()):
+            for option, key in TLS_KEYS.items():  # a missing one: say which option
+                if getattr(base, key) is None:
+                    names.setdefault(key, option)
         settings = dataclasses.replace(base, **changes)
-        settings.validate("zenoh")
+        settings.validate("zenoh", names)
+        settings.check_private_key(names.get("private_key", "zenoh.private_key"))
     except ConfigError as err:
         raise UsageError(str(err)) from None
     if settings.config_file is not None:

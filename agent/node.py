@@ -24,8 +24,12 @@ Either way a measurement stamped more than :data:`TICK_WINDOW` ticks ahead is re
 adopted as the clock.
 
 A neighbour whose liveliness token disappears (killed, or hung past its lease) is lost: the
-agent halts the team (see :mod:`agent.phase_machine`) and keeps answering with zero force until
-it is told to stop.
+agent halts the team (see :mod:`agent.phase_machine`) and answers with zero force. When every
+neighbour's token is back (the link is up again, or the robot's agent was restarted), the robot
+is ready to begin again, and once every robot is, the team starts over from Step 1 in a new
+generation (:mod:`agent.coordination`): a robot that was away missed its own measurements, a
+restarted one lost all it knew, and the load moved unobserved meanwhile, so nothing estimated
+before the halt is kept.
 """
 
 from __future__ import annotations
@@ -171,6 +175,8 @@ class AgentNode:
         self.shares = []
         self.have: set[tuple[int, int]] = set()
         self.lost: set[int] = set()
+        self.present: set[int] = set()
+        """The neighbours whose liveliness token is there."""
         self.late = 0
         self.next_tick = 0
         self.last_phase: Phase | None = None
@@ -207,8 +213,17 @@ class AgentNode:
         elif isinstance(item, Control):
             log.info("robot %d: told to %s", self.robot, item.command)
             self.stop.set()
-        elif isinstance(item, Liveliness) and not item.alive:
+        elif isinstance(item, Liveliness) and item.alive:
             j = item.robot
+            self.present.add(j)
+            if j in self.lost:
+                self.lost.discard(j)
+                log.info("robot %d: neighbour %d is back", self.robot, j)
+            self.agent.team_back = self.present >= set(self.config.neighbours)
+        elif isinstance(item, Liveliness):
+            j = item.robot
+            self.present.discard(j)
+            self.agent.team_back = False
             if self.agent.phase == Phase.DONE or self.stop.is_set():
                 log.info("robot %d: neighbour %d left after the team finished", self.robot, j)
                 return
@@ -285,11 +300,11 @@ class AgentNode:
         if agent.phase != self.last_phase or k % 100 == 0:
             if agent.phase != self.last_phase:
                 epoch = agent.epoch
-                again = (
-                    f" (epoch {epoch}: the load changed)"
-                    if epoch and agent.phase == Phase.INERTIA
-                    else ""
-                )
+                again = ""
+                if epoch and agent.phase == Phase.INERTIA:
+                    again = f" (epoch {epoch}: the load changed)"
+                elif agent.generation and agent.phase == Phase.EXCITE:
+                    again = f" (generation {agent.generation}: every robot is back, from Step 1)"
                 log.info("robot %d: tick %d: phase %s%s", self.robot, k, agent.phase.label, again)
             self.last_phase = agent.phase
             self.port.report(self.status(k))
@@ -310,6 +325,7 @@ class AgentNode:
             decode_errors=self.port.rejects.total,
             late=self.late,
             lost_neighbours=tuple(sorted(self.lost)),
+            generation=self.agent.generation,
         )
 
     def pump(self, timeout: float) -> None:

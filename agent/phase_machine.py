@@ -12,7 +12,8 @@ inertia   ``f_i = ±k z_i⊥`` (eq. 14)                Step 4 ``J``
 push      common ``±f`` (eq. 17)                  Step 5 ``z_C``, Step 6 ``ṗ_C``, Step 7 ``m``
 done      damping: the load comes to rest, or     (tracking goes on; with ``robust``, the
           (``robust``) probes and damping         probes test the load for a change)
-halted    zero                                    (a robot was lost: the team stops)
+halted    zero                                    (a robot was lost: the team stops until
+                                                  every robot is back, then begins again)
 ======== ======================================= ===========================================
 
 A changed load (``robust``): a robot whose probe finds the load no longer the one estimated
@@ -22,7 +23,9 @@ A changed load (``robust``): a robot whose probe finds the load no longer the on
 ``halted`` is entered by :meth:`PhaseMachine.halt` when a neighbour is lost, and reaches the
 rest of the team through the barrier's catch-up rule (it is the highest phase). The paper
 assumes ``n`` robots that all push; estimates made without one of them would be wrong, so the
-team stops and says so rather than carrying on.
+team stops and says so rather than carrying on. A halted robot is ready to leave ``halted``
+once every neighbour is alive again (:attr:`PhaseMachine.team_back`); when all are, the team
+begins again from Step 1 in a new generation (:mod:`agent.coordination`, :mod:`agent.agent`).
 
 The force laws:
 
@@ -114,12 +117,15 @@ class OwnEstimates(Protocol):
 class PhaseMachine:
     """One robot's phase, when it was entered, and the force law of each phase."""
 
-    def __init__(self, config: AgentConfig):
+    def __init__(self, config: AgentConfig, barrier: PhaseBarrier | None = None):
         tuning = config.tuning
         self.tuning = tuning
         self.n = config.n
         self.dt = config.period_s
-        self.barrier = PhaseBarrier(config.robot, config.n, tuning.switch_margin_ticks)
+        self.barrier = barrier or PhaseBarrier(config.robot, config.n, tuning.switch_margin_ticks)
+        """The team's phase (a new generation's machine takes over the barrier that began it)."""
+        self.team_back = False
+        """Whether every neighbour is alive: in ``halted``, this robot is then ready."""
         self.entered: dict[Phase, int] = {Phase.EXCITE: 0}
         """The tick at which each phase was entered (phases skipped are not listed)."""
         self.kick_ticks = round(tuning.kick_duration_s / self.dt)
@@ -245,8 +251,13 @@ class PhaseMachine:
             Phase.DONE: (self._changed, self._monitor_force)
             if self.monitoring
             else (_never_ready, self._brake_force),
+            Phase.HALTED: (self._back, _no_force),
         }
         self._ready, self._law = laws.get(phase, (_never_ready, _no_force))
+
+    def _back(self, k: int, own: OwnEstimates) -> bool:
+        """Halted: ready to begin again once every neighbour is alive."""
+        return self.team_back
 
     def _excite_ready(self, k: int, own: OwnEstimates) -> bool:
         s = own.settle

@@ -108,6 +108,8 @@ class Share:
       :mod:`agent.coordination`): the sender's phase, the bitmask of robots known to be ready
       to leave it, the agreed tick of the switch (``-1`` while none is agreed), and how many
       times the team has restarted for a changed load.
+    - ``generation``: how many times the team has begun again after a halt (every robot back:
+      see :mod:`agent.coordination`); its ticks count from then on as from the start.
     """
 
     sender: int
@@ -125,6 +127,7 @@ class Share:
     gain_centroid: Vec2 = (0.0, 0.0)
     gain_spread: float = 0.0
     epoch: int = 0
+    generation: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,6 +152,7 @@ class Estimates:
     ``epoch`` counts the team's restarts for a changed load (:mod:`agent.coordination`);
     ``change_score`` is the last probe's test of the load against the estimates, in standard
     deviations (:mod:`agent.estimation.load_change`; ``None`` before the first probe ends).
+    ``generation`` counts the team's new beginnings after a halt (:mod:`agent.coordination`).
     """
 
     robot: int
@@ -175,6 +179,7 @@ class Estimates:
     drive_gain_std: float | None = None
     epoch: int = 0
     change_score: float | None = None
+    generation: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,6 +193,8 @@ class Status:
     decode_errors: int = 0
     late: int = 0
     lost_neighbours: tuple[int, ...] = ()
+    generation: int = 0
+    """How many times the team has begun again after a halt (:mod:`agent.coordination`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -437,7 +444,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 5
+WIRE_VERSION = 6
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -448,15 +455,15 @@ class DecodeError(ValueError):
 
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqHB")
+_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqHHB")
 _FLOW = _struct.Struct("<H7d")
 _FLOW_FIELDS = 8
 """A flow: the neighbour, then :data:`agent.estimation.flows.Flow`'s seven numbers."""
 _CLOCK = _struct.Struct("<qd")
-_ESTIMATES = _struct.Struct("<HqBqHBBBBH")
+_ESTIMATES = _struct.Struct("<HqBqHBBBBHH")
 """robot, tick, phase, phase_since, which optional values follow (bit per
 :data:`_OPTIONAL_ESTIMATES` entry), how many relative positions, their covariances,
-started and settled steps follow them, then the epoch."""
+started and settled steps follow them, then the epoch and the generation."""
 _NEIGHBOUR = _struct.Struct("<H2d")
 _NEIGHBOUR_COV = _struct.Struct("<H3d")
 _STEP = _struct.Struct("<Bq")
@@ -539,6 +546,7 @@ def encode(message: object) -> bytes:
             m.switch_at,
             m.instant,
             m.epoch,
+            m.generation,
             len(m.flows),
         )
         return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
@@ -568,6 +576,7 @@ def _encode_estimates(m: Estimates) -> bytes:
         len(m.started),
         len(m.settled),
         m.epoch,
+        m.generation,
     )
     return b"".join(
         (
@@ -598,7 +607,7 @@ def _repeats(layout: _struct.Struct, count: int) -> _struct.Struct:
 def _decode_estimates(body: memoryview) -> Estimates:
     if len(body) < _ESTIMATES.size:
         raise DecodeError(f"estimates: {len(body)} bytes, expected at least {_ESTIMATES.size}")
-    robot, tick, phase, since, present, neighbours, covs, started, settled, epoch = (
+    robot, tick, phase, since, present, neighbours, covs, started, settled, epoch, generation = (
         _ESTIMATES.unpack_from(body)
     )
     if present >> len(_OPTIONAL_ESTIMATES):
@@ -652,6 +661,7 @@ def _decode_estimates(body: memoryview) -> Estimates:
         settled=done,
         relative_positions_cov=relative_cov,
         epoch=epoch,
+        generation=generation,
         **optional,
     )
 
@@ -722,6 +732,8 @@ MAX_GAIN = 100.0
 """A drive's gain, or the team's mean gain as a consensus state."""
 MAX_EPOCH = 10_000
 """The team's restarts for a changed load in one run (one a second for almost three hours)."""
+MAX_GENERATION = 10_000
+"""The team's new beginnings after a halt in one run."""
 
 
 def _within(name: str, value: float, low: float, high: float) -> None:
@@ -762,6 +774,7 @@ def _share(m: Share) -> None:
     _within("share.spread", m.spread, -(MAX_DISTANCE**2), MAX_DISTANCE**2)
     _within("share.switch_at", m.switch_at, -1, MAX_TICK)
     _within("share.epoch", m.epoch, 0, MAX_EPOCH)
+    _within("share.generation", m.generation, 0, MAX_GENERATION)
     _within("share.instant", m.instant, -1, m.tick - 1)
     _within("share.flows (how many)", len(m.flows), 0, m.degree)
     _within("share.gain", m.gain, -MAX_GAIN, MAX_GAIN)
@@ -790,6 +803,7 @@ def _estimates(m: Estimates) -> None:
     _within("estimates.tick", m.tick, -1, MAX_TICK)
     _within("estimates.phase_since", m.phase_since, 0, MAX_TICK)
     _within("estimates.epoch", m.epoch, 0, MAX_EPOCH)
+    _within("estimates.generation", m.generation, 0, MAX_GENERATION)
     for j in m.relative_positions:
         _robot_id("estimates.relative_positions", j)
     for step in (*m.started, *m.settled):
@@ -819,6 +833,7 @@ def _status(m: Status) -> None:
     _within("status.tick", m.tick, -1, MAX_TICK)
     for j in m.lost_neighbours:
         _robot_id("status.lost_neighbours", j)
+    _within("status.generation", m.generation, 0, MAX_GENERATION)
 
 
 def _truth(m: Truth) -> None:
@@ -913,7 +928,7 @@ def _decode(kind: type, payload: bytes):
         fixed = body[: _SHARE.size]
         values = _unpack(_SHARE, fixed, "share")
         s, t, vx, vy, deg, has, cx, cy, spread, gain, hx, hy, q = values[:13]
-        phase, ready, switch_at, instant, epoch, count = values[13:]
+        phase, ready, switch_at, instant, epoch, generation, count = values[13:]
         rest = body[_SHARE.size :]
         if len(rest) != count * _FLOW.size:
             raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
@@ -937,6 +952,7 @@ def _decode(kind: type, payload: bytes):
             (hx, hy),
             q,
             epoch,
+            generation,
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))

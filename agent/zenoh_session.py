@@ -4,11 +4,18 @@ Every session the project opens goes through :func:`open_session`: multicast sco
 and every endpoint is explicit (``tcp/127.0.0.1:PORT`` in demos and tests), shared memory is
 off (it is not available everywhere the agents run), and a client waits for a router that is
 not up yet instead of failing at once.
+
+Off a single host, sessions go over mutual TLS: ``root_ca``, ``certificate`` and
+``private_key`` (made by :mod:`agent.certificates`) and ``tls/HOST:PORT`` endpoints; the
+router's access control (:mod:`agent.access_control`) then knows each process by its
+certificate. Plain ``tcp``/``udp`` to anything but loopback is refused unless ``allow_plain``.
 """
 
 from __future__ import annotations
 
+import ipaddress
 import json
+import logging
 import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -26,6 +33,12 @@ keep-alives wait: with a 2 s lease the sessions of a CAN run (router, plant, fou
 four agents) expired and reconnected every few seconds, and the team halted; with 10 s it
 ran through."""
 _ENDPOINT = re.compile(r"^(tcp|udp|quic|tls)/[^:/\s]+:\d{1,5}$")
+PLAIN = ("tcp", "udp")
+"""Link protocols without encryption or authentication."""
+TLS_FILES = ("root_ca", "certificate", "private_key")
+"""The ``[zenoh]`` keys of mutual TLS: given all three, or none."""
+PLAIN_WARNING = "plain tcp (no TLS, no access control): for loopback runs only"
+log = logging.getLogger("heft.zenoh")
 
 
 @dataclass(frozen=True)
@@ -50,20 +63,108 @@ class ZenohSettings:
     config_file: str | None = None
     """A Zenoh JSON5 config file to start from (TLS, access control, ...); the settings above
     are applied on top of it, so its mode, endpoints, scouting and lease are never used."""
+    root_ca: str | None = None
+    """Mutual TLS: the team's CA certificate (PEM), which every certificate shown to this
+    process must be signed by (``transport/link/tls/root_ca_certificate``). ``root_ca``,
+    ``certificate`` and ``private_key`` go together (see :mod:`agent.certificates`)."""
+    certificate: str | None = None
+    """Mutual TLS: this process's certificate (PEM, signed by ``root_ca``); its Common Name
+    is the identity the router's access control knows it by (``robot-3``, ``plant``, ...)."""
+    private_key: str | None = None
+    """Mutual TLS: the private key of ``certificate`` (PEM; keep it mode 0600)."""
+    allow_plain: bool = False
+    """Allow ``tcp``/``udp`` endpoints to addresses other than loopback: unencrypted, and
+    anyone on the network can join. Off a single host, use ``tls`` endpoints instead."""
 
-    def validate(self, where: str) -> None:
+    def validate(self, where: str, names: dict[str, str] | None = None) -> None:
+        """:class:`ConfigError` naming the key (``where.key``, or ``names[key]`` where given,
+        e.g. a command-line option) unless the settings are usable."""
+        names = names or {}
+
+        def name(key: str) -> str:
+            return names.get(key, f"{where}.{key}")
+
         if self.mode not in ("client", "peer", "router"):
-            raise ConfigError(f"{where}.mode: expected client, peer or router, got {self.mode!r}")
+            raise ConfigError(f"{name('mode')}: expected client, peer or router, got {self.mode!r}")
         for key in ("connect", "listen"):
             for i, endpoint in enumerate(getattr(self, key)):
-                self.check_endpoint(endpoint, f"{where}.{key}[{i}]")
+                self.check_endpoint(endpoint, names.get(key, f"{where}.{key}[{i}]"))
         if self.mode == "client" and not self.connect:
-            raise ConfigError(f"{where}.connect: a client needs at least one router endpoint")
+            raise ConfigError(f"{name('connect')}: a client needs at least one router endpoint")
         if self.mode == "router" and not self.listen:
-            raise ConfigError(f"{where}.listen: a router needs at least one endpoint")
+            raise ConfigError(f"{name('listen')}: a router needs at least one endpoint")
         check_bounds(self, where)
         if self.config_file is not None:
-            self.check_config_file(self.config_file, f"{where}.config_file")
+            self.check_config_file(self.config_file, name("config_file"))
+        given = [key for key in TLS_FILES if getattr(self, key) is not None]
+        if given and len(given) < len(TLS_FILES):
+            missing = next(key for key in TLS_FILES if key not in given)
+            raise ConfigError(
+                f"{name(missing)}: missing: root_ca, certificate and private_key go together"
+                f" (given: {', '.join(map(name, given))})"
+            )
+        for key in given:
+            if key != "private_key":  # (see check_private_key)
+                self.check_config_file(getattr(self, key), name(key))
+        for key in ("connect", "listen"):
+            for i, endpoint in enumerate(getattr(self, key)):
+                at = names.get(key, f"{where}.{key}[{i}]")
+                if not self.allow_plain:
+                    self.check_plain(endpoint, at)
+                if self.is_tls(endpoint) and not given and self.config_file is None:
+                    raise ConfigError(
+                        f"{at}: {endpoint}: a tls endpoint needs root_ca, certificate and"
+                        " private_key (deploy/README.md)"
+                    )
+
+    def check_private_key(self, where: str) -> None:
+        """:class:`ConfigError` naming ``where`` unless ``private_key`` (if any) is readable.
+
+        Not part of :meth:`validate`: on robots the key is root's alone, and the service
+        manager hands it to the process (systemd's ``LoadCredential``) at another path,
+        given on the command line (``--tls-private-key``); the file's path is checked only
+        once the command line has had its say (:func:`agent.command_line.zenoh_settings`,
+        :func:`open_session`)."""
+        if self.private_key is not None:
+            self.check_config_file(self.private_key, where)
+
+    @property
+    def tls(self) -> bool:
+        """Whether the settings give mutual TLS's three files."""
+        return self.root_ca is not None
+
+    @staticmethod
+    def is_tls(endpoint: str) -> bool:
+        return endpoint.split("/", 1)[0] in ("tls", "quic")
+
+    @staticmethod
+    def is_plain(endpoint: str) -> bool:
+        """Whether ``endpoint`` is an unencrypted link (``tcp``, ``udp``)."""
+        return endpoint.split("/", 1)[0] in PLAIN
+
+    @staticmethod
+    def is_loopback(endpoint: str) -> bool:
+        """Whether ``endpoint``'s host is this machine's loopback (127.0.0.0/8, localhost,
+        ::1)."""
+        host = endpoint.split("/", 1)[-1].rsplit(":", 1)[0].strip("[]")
+        if host.lower() == "localhost":
+            return True
+        try:
+            return ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            return False
+
+    @staticmethod
+    def check_plain(endpoint: str, where: str, allow: str = "set allow_plain = true") -> None:
+        """:class:`ConfigError` naming ``where`` if ``endpoint`` is a plain link to an address
+        other than loopback; ``allow`` says how to allow it anyway."""
+        if ZenohSettings.is_plain(endpoint) and not ZenohSettings.is_loopback(endpoint):
+            protocol = endpoint.split("/", 1)[0]
+            raise ConfigError(
+                f"{where}: {endpoint}: plain {protocol} to a non-loopback address: use"
+                " tls/HOST:PORT with root_ca, certificate and private_key (deploy/README.md),"
+                f" or {allow}"
+            )
 
     @staticmethod
     def check_endpoint(endpoint: str, where: str) -> None:
@@ -89,6 +190,14 @@ TX_QUEUE_BATCHES = 16
 """Batches in a link's queue for data-priority messages (Zenoh's maximum; its default is 2)."""
 DROP_WAIT_US = 20_000
 """How long a droppable message waits for room in a full queue (Zenoh's default: 1 000)."""
+SEND_BUFFER_BYTES = 4 << 20
+"""Each TCP or TLS link's socket send buffer (``so_sndbuf``; the kernel caps it at its
+``net.core.wmem_max``). When a peer becomes unreachable (its link cut), what is sent to it
+piles up in this buffer; once the buffer is full, a TLS link's writer waits, and while it
+waits Zenoh cannot close the link when its lease expires: the router stalled, and the lost
+robot was noticed only once its link came back (3.1 s after a 3 s cut). A buffer that holds
+more than a lease's worth of a team's traffic lets the lease close the link: 1.6 s after the
+cut, measured on namespace hosts (tests/test_multihost.py)."""
 
 
 def zenoh_config(settings: ZenohSettings):
@@ -116,13 +225,44 @@ def zenoh_config(settings: ZenohSettings):
     config.insert_json5(
         "transport/link/tx/queue/congestion_control/drop/wait_before_drop", str(DROP_WAIT_US)
     )
+    for protocol in ("tcp", "tls"):
+        config.insert_json5(f"transport/link/{protocol}/so_sndbuf", str(SEND_BUFFER_BYTES))
     if settings.mode == "client":
         config.insert_json5("connect/timeout_ms", str(settings.connect_timeout_ms))
         config.insert_json5(
             "connect/retry",
             '{"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}',
         )
+    if settings.tls:
+        for key, value in tls_keys(settings).items():
+            config.insert_json5(key, json.dumps(value))
     return config
+
+
+def tls_keys(settings: ZenohSettings) -> dict[str, object]:
+    """Zenoh's keys for the settings' mutual TLS (none without it): the CA, the certificate
+    and key shown when listening (a router, or any process with listen endpoints) and when
+    connecting, and ``enable_mtls`` (the listener asks for the client's certificate)."""
+    if not settings.tls:
+        return {}
+    prefix = "transport/link/tls/"
+    keys: dict[str, object] = {f"{prefix}root_ca_certificate": settings.root_ca}
+    if settings.mode == "router" or settings.listen:
+        keys[f"{prefix}listen_certificate"] = settings.certificate
+        keys[f"{prefix}listen_private_key"] = settings.private_key
+    if settings.mode != "router" or settings.connect:
+        keys[f"{prefix}connect_certificate"] = settings.certificate
+        keys[f"{prefix}connect_private_key"] = settings.private_key
+    keys[f"{prefix}enable_mtls"] = True
+    return keys
+
+
+def uses_plain_links(settings: ZenohSettings) -> bool:
+    """Whether any of the settings' endpoints is unencrypted (``tcp``, ``udp``)."""
+    return any(map(ZenohSettings.is_plain, (*settings.connect, *settings.listen)))
+
+
+_warned_plain = False
 
 
 class SessionError(ConfigError):
@@ -133,23 +273,34 @@ class SessionError(ConfigError):
 
 
 def open_session(settings: ZenohSettings):
-    """Open a Zenoh session; close it with ``session.close()`` (or use it in ``with``).
+    """Open a Zenoh session; close it with ``session.close()`` (or use it in ``with``). The
+    first session of a process on plain links says so in the log (:data:`PLAIN_WARNING`).
     :class:`SessionError` if Zenoh cannot (it raises ``zenoh.ZError``: a busy or unusable
     port, no router within ``connect_timeout_ms``)."""
     import zenoh
 
+    global _warned_plain
+    settings.check_private_key("zenoh.private_key")
     try:
-        return zenoh.open(zenoh_config(settings))
+        session = zenoh.open(zenoh_config(settings))
     except zenoh.ZError as err:
         raise SessionError(session_error(str(err), settings)) from None
+    if not _warned_plain and uses_plain_links(settings):
+        _warned_plain = True  # once per process
+        log.info(PLAIN_WARNING)
+    return session
 
 
 _LISTENER = re.compile(r"listener bound to (\w+/\S+?): \[.*?: (.+?) \(os error \d+\)", re.S)
 _UNREACHABLE = re.compile(r"Unable to connect to any of \[(.*?)\]\s*(\. Timeout!|!)", re.S)
 
 
+_LINK_OPTIONS = re.compile(r"#[\w=;.-]+")
+
+
 def session_error(message: str, settings: ZenohSettings) -> str:
     """Zenoh's error on opening a session as one line naming the endpoint and the cause."""
+    message = _LINK_OPTIONS.sub("", message)  # the link options zenoh_config adds (so_sndbuf)
     listener = _LISTENER.search(message)
     if listener:
         endpoint, cause = listener.groups()
@@ -161,7 +312,13 @@ def session_error(message: str, settings: ZenohSettings) -> str:
         waited = f"within {timeout} ms (connect_timeout_ms)"
         if not timeout:
             waited = "to one try (connect_timeout_ms = 0)"
-        return f"connect {', '.join(endpoints)}: no answer {waited}; is the router running?"
+        hint = "is the router running?"
+        if any(map(ZenohSettings.is_tls, endpoints)):
+            hint = (
+                "is the router running, and are its certificate and this process's signed by"
+                " the same CA (root_ca)?"
+            )
+        return f"connect {', '.join(endpoints)}: no answer {waited}; {hint}"
     where = ", ".join((*settings.listen, *settings.connect)) or "zenoh"
     return f"{where}: {_one_line(message)}"
 

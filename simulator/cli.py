@@ -245,6 +245,8 @@ def _run(
     process ``link`` quantises as CAN does."""
     if args.transport == "zenoh":
         return _run_zenoh(args, scenario, faults, stop.event, link, on_ready)
+    if args.transport == "watch":
+        return _watch(args, scenario, stop.event)
     from simulator.inprocess import run_inprocess
 
     progress = None if args.quiet else _progress_printer(started, sys.stderr)
@@ -361,6 +363,47 @@ def _run_zenoh(
     finally:
         if stream is not sys.stderr:
             stream.close()
+
+
+def _watch(args: argparse.Namespace, scenario: Scenario, stop: threading.Event) -> RunOutcome:
+    """``heft watch``'s run: a team that runs elsewhere, followed
+    (:func:`simulator.watch.watch_team`)."""
+    from agent.config import Bound
+    from agent.protocol import Keys
+    from simulator.launcher import RunFailed
+    from simulator.watch import watch_team
+
+    Bound(0, 3600, "s").check("--rejoin-s", args.rejoin_s)
+    Bound(0, 3600, "s", open_low=True).check("--start-timeout", args.start_timeout)
+    team = args.team or scenario.name
+    try:
+        Keys(team)
+    except ValueError as err:
+        raise UsageError(f"--team: {err}") from None
+    settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
+
+    def report(time_s: float, phases: str) -> None:
+        if not args.quiet:
+            print(
+                f"{PROG}: t = {time_s:6.1f} s simulated, phases so far: {phases}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    try:
+        return watch_team(
+            scenario,
+            team,
+            settings,
+            rejoin_s=args.rejoin_s,
+            start_timeout_s=args.start_timeout,
+            stop_when_done=args.stop,
+            progress=report,
+            stop=stop,
+        )
+    except RunFailed as failed:
+        rejections = failed.transport.get("rejections")
+        raise _NothingRecorded(failed.reason, failed.detail, rejections) from None
 
 
 def _write_plots(outcome: RunOutcome, directory: Path) -> list[Path]:
@@ -714,9 +757,10 @@ def _add_can_options(parser: argparse.ArgumentParser, what: str) -> None:
 
 # ------------------------------------------------------------------------------ the parsers
 def register(commands: argparse._SubParsersAction) -> None:
-    """Add ``heft run``, ``scenario``, ``bench``, ``sim``, ``demo`` and ``baseline`` (entry
-    point of the group ``heft.commands``)."""
+    """Add ``heft run``, ``watch``, ``scenario``, ``bench``, ``sim``, ``demo`` and ``baseline``
+    (entry point of the group ``heft.commands``)."""
     _add_run(commands)
+    _add_watch(commands)
     _add_scenario(commands)
     _add_bench(commands)
     _add_sim(commands)
@@ -784,6 +828,71 @@ def _add_run(commands: argparse._SubParsersAction) -> None:
     _add_output_options(parser)
     _add_record_options(parser)
     parser.set_defaults(handler=cmd_run, dashboard=False, dashboard_port=None, no_wait=True)
+
+
+def _add_watch(commands: argparse._SubParsersAction) -> None:
+    from simulator.watch import REJOIN_S, START_TIMEOUT_S
+
+    parser = commands.add_parser(
+        "watch",
+        help="follow a team that runs on other hosts, as heft run does",
+        formatter_class=HelpFormatter,
+        description=(
+            "Follow a team whose router, plant (heft sim) and agents (heft agent) were started\n"
+            "elsewhere, e.g. on several hosts by their units, as the operator: print progress,\n"
+            "then the table of every robot's estimates against the plant's truth, as heft run\n"
+            "does, and write the results JSON. A halted team is given --rejoin-s to begin\n"
+            "again (its lost robots back: a link up again, an agent restarted).\n\n"
+            "Exit status: 0 converged, 1 not converged (halted and not begun again, out of\n"
+            "time, stalled, nothing heard), 2 bad scenario or arguments, 4 the router does not\n"
+            "answer, 130 interrupted."
+        ),
+        epilog=(
+            "example:\n"
+            "  heft watch simulator/scenarios/paper.toml --team paper --stop \\\n"
+            "      --connect tls/192.168.10.1:7447 --tls-root-ca /etc/heft/tls/ca.pem \\\n"
+            "      --tls-certificate /etc/heft/tls/operator.pem \\\n"
+            "      --tls-private-key /etc/heft/tls/operator-key.pem"
+        ),
+    )
+    parser.add_argument("scenario", metavar="SCENARIO", help="the team's scenario TOML file")
+    parser.add_argument("--team", help="the team's name (default: the scenario's name)")
+    parser.add_argument(
+        "--rejoin-s",
+        type=float,
+        default=REJOIN_S,
+        metavar="S",
+        help=f"how long a halted team is given to begin again, 0 to 3600 (default: {REJOIN_S:g})",
+    )
+    parser.add_argument(
+        "--start-timeout",
+        type=float,
+        default=START_TIMEOUT_S,
+        metavar="S",
+        help="give up if nothing is heard of the plant within S seconds, in (0, 3600]"
+        f" (default: {START_TIMEOUT_S:g})",
+    )
+    parser.add_argument(
+        "--stop",
+        action="store_true",
+        help="once the run is over, tell every process of the team to stop (default: no)",
+    )
+    _add_output_options(parser)
+    add_zenoh_options(parser, connect=DEFAULT_ROUTER, listen="none", config="none")
+    parser.set_defaults(
+        handler=cmd_run,
+        transport="watch",
+        can=False,
+        can_interface=None,
+        can_channel=None,
+        drop=0.0,
+        delay_ms=0.0,
+        record=None,
+        no_record=True,
+        dashboard=False,
+        dashboard_port=None,
+        no_wait=True,
+    )
 
 
 def _add_output_options(parser: argparse.ArgumentParser) -> None:
@@ -973,8 +1082,8 @@ def _add_sim(commands: argparse._SubParsersAction) -> None:
             "frames from its AGV bridge (heft bridge), which talks to the agent; it then also\n"
             "waits for every robot's bridge, and takes no measurement or command over Zenoh.\n\n"
             "Exit status: 0 done or stopped, 1 the agents were not all up within\n"
-            "--start-timeout, 2 bad scenario or arguments, or no router within\n"
-            "--connect-timeout-ms, 4 a CAN bus could not be opened."
+            "--start-timeout, 2 bad scenario or arguments, 4 no router within\n"
+            "--connect-timeout-ms, or a CAN bus that could not be opened."
         ),
         epilog=(
             "examples:\n"
@@ -1005,7 +1114,7 @@ def _add_sim(commands: argparse._SubParsersAction) -> None:
         type=int,
         metavar="MS",
         help="wait this long for the router at start-up, 0 to 600000 ms, then fail with exit"
-        " status 2 (default: 15000)",
+        " status 4 (default: 15000)",
     )
     sim.set_defaults(handler=cmd_sim)
 

@@ -194,10 +194,27 @@ class Collector:
     down by its machine does not back up the router's link to it, where messages that may be
     dropped would be (a run whose final instant is missed ends on a later one)."""
 
-    def __init__(self, session, keys: Keys, n: int, record_every: int, end_tick: int = 0):
+    def __init__(
+        self,
+        session,
+        keys: Keys,
+        n: int,
+        record_every: int,
+        end_tick: int = 0,
+        rejoin_s: float = HALT_GRACE_S,
+    ):
         self.n = n
         self.end_tick = end_tick
         """The earliest final instant (the scenario's load changes and hold)."""
+        self.rejoin_s = rejoin_s
+        """How long a halted team is given to begin again before the run is over (robots that
+        come back: a restarted agent, a link up again); by default only the moment it takes
+        to hear who was lost."""
+        self.generation = 0
+        """The team's newest generation heard (:mod:`agent.coordination`)."""
+        self.rejoins: list[dict[str, int]] = []
+        """Each new beginning: the tick the team halted at and the tick it began again."""
+        self.halted_tick = 0
         self.record_every = record_every
         self.rejects = RejectLog(LOG, "launcher")
         self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
@@ -300,9 +317,28 @@ class Collector:
             if not self._finished:
                 self.lost.update(message.lost)
 
+    def _generation(self, message: Estimates | Status) -> bool:
+        """Whether ``message`` is of the team's newest generation (a newer one: the team began
+        again, and what the collector knew of the old one's progress is dropped)."""
+        if message.generation < self.generation:
+            return False
+        if message.generation > self.generation:
+            if message.phase != Phase.HALTED:
+                LOG.info("the team began again (generation %d)", message.generation)
+                began = message.phase_since if isinstance(message, Estimates) else message.tick
+                self.rejoins.append({"halted": self.halted_tick, "began": began})
+                self.halted = False
+                self.lost.clear()
+                self.done_since.clear()
+                self.phase_ticks = {p: t for p, t in self.phase_ticks.items() if p == "halted"}
+            self.generation = message.generation
+        return True
+
     def _estimate(self, est: Estimates) -> None:
+        if not self._generation(est):
+            return
         if est.phase == Phase.HALTED:
-            self._halt()
+            self._halt(est.tick)
         if est.phase == Phase.DONE:
             self.done_since[est.robot] = est.phase_since
         else:  # (a changed load: the team estimates it again)
@@ -311,18 +347,21 @@ class Collector:
         self._complete(est.tick)
 
     def _status(self, status: Status) -> None:
+        if not self._generation(status):
+            return
         self.statuses[status.robot] = status
         self.lost.update(status.lost_neighbours)
         tick = self.phase_ticks.get(status.phase.label)
         if tick is None or status.tick < tick:
             self.phase_ticks[status.phase.label] = status.tick
         if status.phase == Phase.HALTED:
-            self._halt()
+            self._halt(status.tick)
 
-    def _halt(self) -> None:
+    def _halt(self, tick: int) -> None:
         if not self.halted:
             self.halted = True
             self.halted_at = time.perf_counter()
+            self.halted_tick = tick
 
     @property
     def done_instant(self) -> int | None:
@@ -362,7 +401,7 @@ class Collector:
     def finished(self) -> bool:
         # After a halt, a moment more to hear who was lost (agents and plant report it).
         now = time.perf_counter()
-        halt_over = self.halted and now - self.halted_at > HALT_GRACE_S
+        halt_over = self.halted and now - self.halted_at > self.rejoin_s
         final = self.final is not None and (
             self.final.truth.tick == self.done_instant or now - self.final_at > self._grace_s()
         )
@@ -534,11 +573,25 @@ def run_zenoh(
         finally:
             stop_all(children[:0:-1])  # whatever is left of the plant and the agents
             stop_all(children[:1], ROUTER_GRACE_S)
-    transport = _transport_report(collector, cpu)
-    final = collector.final or collector.latest
+    return run_outcome(scenario, collector, verdict, started, cpu)
+
+
+def run_outcome(
+    scenario: Scenario,
+    collector: Collector | None,
+    verdict: Verdict,
+    started: float,
+    cpu: dict[str, float | None],
+    heard: str = "recorded",
+) -> RunOutcome:
+    """The outcome of a run the collector followed since ``started``; :class:`RunFailed`
+    (saying nothing was ``heard``) if no instant of every robot's estimates with the truth
+    was."""
+    transport = transport_report(collector, cpu)
+    final = None if collector is None else collector.final or collector.latest
     if final is None:
-        nothing = "no instant of every robot's estimates with the truth was recorded"
-        raise RunFailed(verdict.reason or "nothing recorded", transport, verdict.detail or nothing)
+        nothing = f"no instant of every robot's estimates with the truth was {heard}"
+        raise RunFailed(verdict.reason or f"nothing {heard}", transport, verdict.detail or nothing)
     return RunOutcome(
         scenario=scenario,
         converged=not verdict.reason,
@@ -588,13 +641,14 @@ def _shut_down(
     collector.drain(0.2)
 
 
-def _transport_report(collector: Collector | None, cpu: dict[str, float | None]) -> dict:
+def transport_report(collector: Collector | None, cpu: dict[str, float | None]) -> dict:
     if collector is None:
         return {"cpu_s": cpu}
     report = {
         "plant": dataclasses.asdict(collector.plant_status) if collector.plant_status else None,
         "lost": sorted(collector.lost),
         "halted": collector.halted,
+        "rejoins": collector.rejoins,
         "decode_errors": collector.rejects.total,
         "rejections": collector.rejections(),
         "cpu_s": cpu,

@@ -12,8 +12,13 @@ counters.
 - ``realtime``: the plant steps on the wall clock at the sensor rate, applying the newest
   command each robot has sent; late and missing commands are held (the previous one stays)
   and counted, and the latency from publishing a tick to receiving each command is measured.
+  As an AGV's bridge does, a robot whose newest command is more than
+  :data:`WATCHDOG_TICKS` ticks old gets zero force until it answers again (counted as
+  missing): a robot cut off from the network stops pushing.
 
-Robots whose agent's liveliness ends get zero force from then on.
+Robots whose agent's liveliness ends get zero force until it is back (the robot's agent
+restarted, or its link up again): then the plant applies its commands again, as a real AGV
+would.
 
 The port is the robots' hardware as the plant stands in for it: Zenoh
 (:class:`~agent.zenoh_robot_io.ZenohAgentsPort`) when the agents talk to the plant directly,
@@ -47,6 +52,9 @@ log = logging.getLogger("heft.sim")
 LATENCY_SAMPLES = 10_000
 """Command latencies kept for the percentiles: the newest 25 s of four robots at 100 Hz
 (memory stays flat however long the plant runs)."""
+WATCHDOG_TICKS = 20
+"""Realtime: a robot's newest command older than this many ticks is no longer applied (200 ms
+at the paper's 100 Hz, the AGV bridge's watchdog in a real-time run)."""
 SLOW_TICK_S = 2.0
 """Lockstep: a tick that waits this long for a command is logged (once)."""
 WAIT_S = 0.2
@@ -75,6 +83,10 @@ class PlantNode:
         self.start_timeout_s = start_timeout_s
         self.alive: set[int] = set()
         self.lost: set[int] = set()
+        self.gone: dict[int, set[str]] = {}
+        self.silent: set[int] = set()
+        """Realtime: robots whose commands stopped (the watchdog gives them zero force)."""
+        """What of each lost robot is gone (``agent``, ``bridge``) until it comes back."""
         self.commands: dict[int, Command] = {}
         self.late = 0
         self.missing = 0
@@ -107,6 +119,15 @@ class PlantNode:
         elif isinstance(item, Liveliness):
             robot = item.robot
             if item.alive:
+                gone = self.gone.get(robot, set())
+                gone.discard(item.who)
+                if robot in self.lost and not gone:
+                    log.info(
+                        "robot %d: back at t = %.2f s; it pushes again", robot, self.plant.time_s
+                    )
+                    self.lost.discard(robot)
+                    del self.gone[robot]
+                    self.publish_status()
                 if robot not in self.lost:
                     self.alive.add(robot)
                 return
@@ -122,6 +143,7 @@ class PlantNode:
                     self.plant.time_s,
                 )
             self.lost.add(robot)
+            self.gone.setdefault(robot, set()).add(item.who)
             self.alive.discard(robot)
             self.commands.pop(robot, None)
             self.plant.command(robot, (0.0, 0.0))
@@ -161,6 +183,22 @@ class PlantNode:
                     self.missing += 1
                 self.plant.command(robot, (0.0, 0.0))
                 continue
+            if self.clock == "realtime" and k - command.tick > WATCHDOG_TICKS:
+                if robot not in self.silent:
+                    self.silent.add(robot)
+                    log.warning(
+                        "robot %d: no command for %d ticks at t = %.2f s; zero force until it"
+                        " answers again",
+                        robot,
+                        k - command.tick,
+                        self.plant.time_s,
+                    )
+                self.missing += 1
+                self.plant.command(robot, (0.0, 0.0))
+                continue
+            if robot in self.silent:
+                self.silent.discard(robot)
+                log.info("robot %d: answering again at t = %.2f s", robot, self.plant.time_s)
             if command.tick < k:
                 self.late += 1
             self.plant.command(robot, command.force)

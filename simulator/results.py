@@ -372,9 +372,33 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
     }
     if "bridges" in outcome.transport:  # a run over CAN: each robot's AGV bridge's counters
         document["bridges"] = outcome.transport["bridges"]
+    network = network_dict(outcome)
+    if network is not None:
+        document["network"] = network
     if outcome.converged:
         del document["detail"]  # a sentence saying why not: only when it did not
     return document
+
+
+def network_dict(outcome: RunOutcome) -> dict[str, Any] | None:
+    """A run over Zenoh: each tick's command latency as the plant measured it (publishing the
+    tick to receiving its command: p50, p99, ms) and each time the team halted and began
+    again (``halted_s``, ``began_s``); ``None`` in one process."""
+    plant = outcome.transport.get("plant")
+    if plant is None:
+        return None
+    period = outcome.scenario.period_s
+    return {
+        "command_latency_ms": {
+            "p50": plant.get("latency_ms_p50"),
+            "p99": plant.get("latency_ms_p99"),
+            "samples": plant.get("latency_samples"),
+        },
+        "rejoins": [
+            {"halted_s": r["halted"] * period, "began_s": r["began"] * period}
+            for r in outcome.transport.get("rejoins", [])
+        ],
+    }
 
 
 def failed_results_dict(

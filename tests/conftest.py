@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -193,3 +194,23 @@ def vcan() -> None:
     if os.environ.get("HEFT_REQUIRE_VCAN") == "1":
         pytest.fail(f"vcan unavailable but HEFT_REQUIRE_VCAN=1: {VCAN_HELP}")
     pytest.skip(VCAN_HELP)
+
+
+TLS_DIR = "/etc/heft/tls"
+"""Where the deployed configs (deploy/paper) name the team's certificates."""
+
+
+def loadable_copy(path: Path, folder: Path) -> Path:
+    """``path`` with its TLS files moved to placeholders in ``folder`` (they exist on the
+    robots only; the agent checks only that they are readable when it loads the file)."""
+    tls = folder / "tls"
+    tls.mkdir(exist_ok=True)
+    from agent.zenoh_session import TLS_FILES
+
+    text = path.read_text(encoding="utf-8")
+    for key in TLS_FILES:
+        name = Path(tomllib.loads(text)["zenoh"][key]).name
+        (tls / name).write_text("placeholder\n", encoding="utf-8")
+    copy = folder / path.name
+    copy.write_text(text.replace(f'"{TLS_DIR}/', f'"{tls}/'), encoding="utf-8")
+    return copy

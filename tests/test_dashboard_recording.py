@@ -167,8 +167,11 @@ def start_recorder(path: Path, team: Team) -> subprocess.Popen:
         text=True,
         env=env,
     )
-    line = process.stderr.readline()
-    assert "recording team" in line, line + process.stderr.read()
+    said = []
+    while len(said) < 3 and not any("recording team" in line for line in said):
+        said.append(process.stderr.readline())  # (after the plain link's note, if any)
+    assert "recording team" in said[-1], "".join(said) + process.stderr.read()
+    threading.Thread(target=process.stderr.read, daemon=True).start()  # (never blocks it)
     return process
 
 

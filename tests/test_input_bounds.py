@@ -41,7 +41,7 @@ from simulator.scenario import (
     load_scenario,
     polygon_diameter,
 )
-from tests.conftest import PAPER, ROOT
+from tests.conftest import PAPER, ROOT, loadable_copy
 
 RANGE = re.compile(r"[\[(][^,\]]+, [^\]]+\]")
 """A range as the messages write it: ``[10, 1000]``, ``(0, 3600]``, ``[1 tick, 60]``."""
@@ -109,10 +109,10 @@ def refused(capsys, argv: list[str], *words: str, status: int = 2) -> str:
 
 
 # ------------------------------------------------------------------------------ the probes
-def test_the_paper_scenario_and_the_deployed_configs_are_within_every_range() -> None:
+def test_the_paper_scenario_and_the_deployed_configs_are_within_every_range(tmp_path) -> None:
     load_scenario(PAPER)
     for path in sorted((ROOT / "deploy" / "paper").glob("robot-*.toml")):
-        load_agent_config(path)
+        load_agent_config(loadable_copy(path, tmp_path))  # (its TLS files: on robots only)
 
 
 def test_generated_scenarios_are_within_every_range() -> None:
@@ -275,7 +275,7 @@ def test_open_session_says_which_endpoint_failed() -> None:
 
 def test_an_address_not_on_this_machine_is_one_line(capsys) -> None:
     # TEST-NET-1 (RFC 5737): never assigned to this machine's interfaces
-    argv = ["router", "--listen", "tcp/192.0.2.1:7447"]
+    argv = ["router", "--listen", "tcp/192.0.2.1:7447", "--allow-plain"]
     refused(capsys, argv, "listen tcp/192.0.2.1:7447", status=4)
 
 

@@ -22,7 +22,7 @@ from tests.conftest import ROOT
 PRODUCT_PACKAGES = ("agent", "simulator", "bridge", "dashboard")
 """The packages the product ships (bridge and dashboard once they exist)."""
 TOP_LEVEL = {*PRODUCT_PACKAGES, "tests", "deploy"}
-COMMANDS = {"run", "scenario", "bench", "agent", "sim", "router", "demo"}
+COMMANDS = {"run", "scenario", "bench", "agent", "sim", "router", "demo", "deploy"}
 HEAVY = ("pymunk", "matplotlib", "numpy")
 
 

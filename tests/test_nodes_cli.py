@@ -5,7 +5,8 @@ process subcommands' bad input and help: all without a Zenoh network.
   what the launcher would write for the team "paper" on the wall clock;
 - ``load_agent_config`` turns every mistake into a one-line :class:`ConfigError` naming the file
   and the key;
-- deploy/zenoh/router.json5 is the router ``heft router`` runs: loopback only, no multicast;
+- deploy/zenoh/router.json5 is the router ``heft router`` runs, secured (TLS only, no multicast;
+  its access control is tested in tests/test_security.py);
 - ``heft agent|sim|router|run`` exit 2 with one ``heft: error:`` line on bad input, and
   ``--help`` describes each command;
 - the Zenoh options every process command shares (``--connect``, ``--listen``,
@@ -36,12 +37,11 @@ from agent.protocol import CLOCKS
 from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings, zenoh_config
 from simulator.launcher import robot_toml
 from simulator.scenario import load_scenario
-from tests.conftest import PAPER, ROOT
+from tests.conftest import PAPER, ROOT, loadable_copy
 
 DEPLOY = ROOT / "deploy"
 ROBOT_FILES = {i: DEPLOY / "paper" / f"robot-{i}.toml" for i in range(1, 5)}
 ROUTER_JSON5 = DEPLOY / "zenoh" / "router.json5"
-LOOPBACK = re.compile(r"^tcp/127\.0\.0\.1:\d{1,5}$")
 
 
 @pytest.fixture(scope="module")
@@ -50,8 +50,16 @@ def paper():
 
 
 @pytest.fixture(scope="module")
-def deployed() -> dict[int, AgentNodeConfig]:
-    return {i: load_agent_config(path) for i, path in ROBOT_FILES.items()}
+def loadable(tmp_path_factory) -> dict[int, Path]:
+    """The deployed robot files, their TLS files (on the robots only) swapped for
+    placeholders."""
+    folder = tmp_path_factory.mktemp("deployed")
+    return {i: loadable_copy(path, folder) for i, path in ROBOT_FILES.items()}
+
+
+@pytest.fixture(scope="module")
+def deployed(loadable) -> dict[int, AgentNodeConfig]:
+    return {i: load_agent_config(path) for i, path in loadable.items()}
 
 
 # ----------------------------------------------------------------------------- deploy/paper
@@ -70,19 +78,20 @@ def test_robot_file_loads_as_documented(robot: int, deployed) -> None:
     assert config.clock == "realtime"
     assert config.period_s == 0.01
     assert config.zenoh.mode == "client"
-    assert config.zenoh.connect == ("tcp/127.0.0.1:7447",)
+    assert config.zenoh.connect == ("tls/192.168.10.1:7447",)  # the router, over mutual TLS
     assert config.zenoh.listen == ()
+    assert config.zenoh.certificate.endswith(f"/robot-{robot}.pem") and not config.zenoh.allow_plain
     assert config.faults == FaultSettings()  # no injected faults on robots
     assert config.tuning == AgentTuning()  # the paper's gains
 
 
 @pytest.mark.parametrize("robot", sorted(ROBOT_FILES))
-def test_robot_file_is_also_its_bridges_config(robot: int, deployed) -> None:
+def test_robot_file_is_also_its_bridges_config(robot: int, deployed, loadable) -> None:
     """The robot's AGV bridge reads the same file: its bus, node id, 100 ms watchdog, Sync
     ticks and real-time priority; the agent part is the agent's."""
     from bridge.config import CanSettings, load_bridge_config
 
-    config = load_bridge_config(ROBOT_FILES[robot])
+    config = load_bridge_config(loadable[robot])
     assert config.robot == deployed[robot]
     assert config.can == CanSettings(
         interface="socketcan", channel="can0", watchdog_ms=100, realtime_priority=50
@@ -92,7 +101,8 @@ def test_robot_file_is_also_its_bridges_config(robot: int, deployed) -> None:
 
 def test_robot_files_share_the_team_settings(deployed) -> None:
     def team_part(c: AgentNodeConfig) -> AgentNodeConfig:
-        return dataclasses.replace(c, robot=1, neighbours=(2,))
+        zenoh = dataclasses.replace(c.zenoh, certificate=None, private_key=None)  # its own
+        return dataclasses.replace(c, robot=1, neighbours=(2,), zenoh=zenoh)
 
     assert len({team_part(c) for c in deployed.values()}) == 1
 
@@ -110,8 +120,10 @@ def test_neighbours_are_symmetric_and_match_the_paper_graph(deployed, paper) -> 
 
 @pytest.mark.parametrize("robot", sorted(ROBOT_FILES))
 def test_robot_file_is_what_the_launcher_writes_for_the_paper_team(robot, deployed, paper) -> None:
-    generated = robot_toml(robot, paper, "paper", "realtime", DEFAULT_ROUTER, FaultSettings())
-    assert load_config_text(generated) == deployed[robot]
+    generated = load_config_text(
+        robot_toml(robot, paper, "paper", "realtime", DEFAULT_ROUTER, FaultSettings())
+    )  # (but for the [zenoh] table: the robots' is secured, the launcher's on loopback)
+    assert dataclasses.replace(deployed[robot], zenoh=generated.zenoh) == generated
 
 
 @pytest.mark.parametrize("robot", sorted(ROBOT_FILES))
@@ -353,26 +365,26 @@ def _endpoints(node) -> list[str]:
     return [node] if isinstance(node, str) and "/" in node else []
 
 
-def test_router_config_is_a_loopback_router_without_multicast(router_config: dict) -> None:
+def test_router_config_is_a_tls_router_without_multicast(router_config: dict) -> None:
     assert router_config["mode"] == "router"
-    assert router_config["listen"]["endpoints"] == ["tcp/127.0.0.1:7447"]
+    assert router_config["listen"]["endpoints"] == ["tls/192.168.10.1:7447"]
     assert router_config.get("connect", {}).get("endpoints", []) == []
     assert router_config["scouting"]["multicast"]["enabled"] is False
     gossip = router_config["scouting"].get("gossip", {})
     assert gossip.get("multihop", False) is False
     assert gossip.get("autoconnect", {}).get("router", []) == []  # never dials out
     assert router_config["transport"]["shared_memory"]["enabled"] is False
-    endpoints = _endpoints(router_config)
-    assert endpoints and all(LOOPBACK.match(e) for e in endpoints), endpoints
+    endpoints = [e for e in _endpoints(router_config) if re.match(r"^[a-z]+/[^/]+:\d+$", e)]
+    assert endpoints and all(e.startswith("tls/") for e in endpoints), endpoints
+    assert router_config["transport"]["link"]["tls"]["enable_mtls"] is True
 
 
 def test_router_config_is_what_heft_router_runs() -> None:
     zenoh = pytest.importorskip("zenoh")
     deployed = zenoh.Config.from_file(str(ROUTER_JSON5))  # zenohd's own parser and schema
     ours = zenoh_config(ZenohSettings(mode="router", connect=(), listen=(DEFAULT_ROUTER,)))
-    for key in (
+    for key in (  # its listen endpoint is on the robots' network (heft router --listen)
         "mode",
-        "listen/endpoints",
         "connect/endpoints",
         "scouting/multicast/enabled",
         "transport/shared_memory/enabled",
@@ -404,10 +416,12 @@ def test_agent_unit() -> None:
 
 def test_router_unit() -> None:
     unit = _unit("heft-router.service")
-    assert unit["ExecStart"] == ["/opt/heft/.venv/bin/heft router --listen tcp/127.0.0.1:7447"]
+    (start,) = unit["ExecStart"]
+    assert start.startswith("/opt/heft/.venv/bin/heft router ")
+    assert "--zenoh-config /etc/heft/router.json5" in start  # secured: TLS, access control
     assert unit["Restart"] == ["on-failure"]
     assert "network-online.target" in unit["After"][0].split()
-    assert unit["User"] == ["heft"]
+    assert unit["DynamicUser"] == ["yes"]
     assert not (DEPLOY / "systemd" / "heft-sim.service").exists()
 
 
@@ -522,13 +536,18 @@ def test_every_process_command_documents_the_zenoh_options(command: str, capsys)
 
 
 # ----------------------------------------------------------------------------- Zenoh options
-ROBOT_1 = str(ROBOT_FILES[1])
 ZENOH_ARGS = {
-    "agent": ["agent", "--config", ROBOT_1],
+    "agent": ["agent", "--config", "ROBOT_1"],  # (see _robot_1)
     "sim": ["sim", str(PAPER)],
     "router": ["router"],
 }
 JSON5 = '{\n  // a comment\n  mode: "peer",\n  scouting: { multicast: { enabled: true } },\n}\n'
+
+
+@pytest.fixture(autouse=True)
+def _robot_1(loadable, monkeypatch) -> None:
+    """``heft agent``'s config in :data:`ZENOH_ARGS`: robot 1's deployed file, loadable."""
+    monkeypatch.setitem(ZENOH_ARGS, "agent", ["agent", "--config", str(loadable[1])])
 
 
 def parse_zenoh_options(*argv: str) -> argparse.Namespace:
@@ -587,7 +606,7 @@ def test_zenoh_options_replace_what_they_name_and_nothing_else(deployed, tmp_pat
     """``heft agent --connect ...`` overrides robot.toml's ``[zenoh] connect`` only."""
     path = tmp_path / "zenoh.json5"
     path.write_text(JSON5, encoding="utf-8")
-    base = dataclasses.replace(deployed[1].zenoh, lease_ms=3000)
+    base = dataclasses.replace(deployed[1].zenoh, lease_ms=3000, allow_plain=True)
     args = parse_zenoh_options(
         "--connect",
         "tcp/10.0.0.1:7447",

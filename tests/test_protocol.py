@@ -294,6 +294,7 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         gain_spread=numbers,
         instant=ticks,
         epoch=st.integers(0, 10_000),
+        generation=st.integers(0, 10_000),
     )
     maybe = lambda strategy: st.none() | strategy  # noqa: E731
     # (xx, ρ √(xx yy), yy): a covariance whenever xx, yy ≥ 0; anything, from anything.
@@ -326,6 +327,7 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         drive_gain_std=maybe(numbers),
         epoch=st.integers(0, 10_000),
         change_score=maybe(st.floats(0.0, 1e6)),
+        generation=st.integers(0, 10_000),
     )
     return st.one_of(
         st.builds(Measurement, robot=ids, tick=ticks, time_s=numbers, velocity=pairs, force=pairs),
@@ -536,9 +538,9 @@ def test_share_flow_count_must_match_its_bytes() -> None:
     rejects(Share, payload[:-1])  # a flow cut short
 
 
-ESTIMATES_FIXED = struct.Struct("<HqBqHBBBBH")
+ESTIMATES_FIXED = struct.Struct("<HqBqHBBBBHH")
 """robot, tick, phase, phase_since, presence bits, neighbours, covariances, started, settled,
-epoch."""
+epoch, generation."""
 
 
 def _estimates_fixed(message: Estimates, **changes) -> bytes:
@@ -557,6 +559,7 @@ def _estimates_fixed(message: Estimates, **changes) -> bytes:
                 "started",
                 "settled",
                 "epoch",
+                "generation",
             ),
             ESTIMATES_FIXED.unpack_from(payload, 3),
             strict=True,
