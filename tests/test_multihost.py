@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
+import sys
 import time
 import tomllib
 from pathlib import Path
@@ -165,12 +167,44 @@ def network(tmp_path: Path):
 
 
 def _converge(network: Network, folder: Path) -> tuple[dict, dict]:
-    """A run of the paper's team: its worst errors (within bounds) and command latency."""
+    """A run of the paper's team, watched by the dashboard too (its own identity): its worst
+    errors (within bounds) and command latency. No private key is in a log or the
+    recording."""
     record, results = folder / "run.mcap", folder / "results.json"
+    port = 8765
+    dashboard = ["dashboard", "--team", TEAM, "--port", str(port), *network.client("dashboard")]
+    network.hosts.start(network.host("operator"), "dashboard", dashboard)
     watcher = network.start_run(record, results)
     document = _finish(network, watcher, results)
     assert document["network"]["rejoins"] == []
+    table = _dashboard_summary(network, port)  # its final table, from the operator's host
+    assert table["final"] and sorted(table["robots"]) == ["1", "2", "3", "4"], table
+    messages = _recording(network, record)
+    assert messages
+    keys = [p.read_text("utf-8").splitlines()[1] for p in network.certs.glob("*-key.pem")]
+    for text in [p.read_text("utf-8", "replace") for p in folder.glob("*.log")] + [
+        record.read_bytes().decode("latin-1")
+    ]:
+        assert "PRIVATE KEY" not in text and not any(key in text for key in keys)
     return _within_bounds(document), document["network"]["command_latency_ms"]
+
+
+def _dashboard_summary(network: Network, port: int) -> dict:
+    """``GET /api/summary`` of the dashboard on the operator's host (on its loopback)."""
+    script = (
+        "import sys, urllib.request;"
+        f"sys.stdout.write(urllib.request.urlopen('http://127.0.0.1:{port}/api/summary',"
+        " timeout=10).read().decode())"
+    )
+    ns = network.hosts.ns(network.host("operator"))
+    done = subprocess.run(
+        ["ip", "netns", "exec", ns, sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert done.returncode == 0, done.stderr + network.hosts.log("dashboard")[-2000:]
+    return json.loads(done.stdout)
 
 
 def _wait_for_tick(record_log: Path, hosts: Hosts, tick_s: float, timeout_s: float = 90.0):
