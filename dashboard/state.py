@@ -342,6 +342,7 @@ class TeamState:
             row = {
                 "phase": est.phase.label,
                 "epoch": est.epoch,
+                "generation": est.generation,
                 "change_score": est.change_score,
                 "tick": est.tick,
                 "mass": est.mass,
@@ -678,7 +679,16 @@ class TeamState:
 
 
 _PAGE_ROBOT = ("phase", "tick", "segments", "alive")
-_PAGE_ROW = ("phase", "epoch", "change_score", "mass", "moment", "contact_to_com", "errors")
+_PAGE_ROW = (
+    "phase",
+    "epoch",
+    "generation",
+    "change_score",
+    "mass",
+    "moment",
+    "contact_to_com",
+    "errors",
+)
 _NOT_ON_PAGE = ("truth", "plant", "received", "rejected")
 
 

@@ -11,6 +11,8 @@ import pytest
 from agent.coordination import PhaseBarrier
 from agent.protocol import Phase, Share, decode, encode
 from agent.transport import InMemoryTransport
+from dashboard.geometry import LoadGeometry
+from dashboard.state import TeamState
 from simulator.inprocess import make_agents
 from simulator.plant import Plant
 from simulator.scenario import load_scenario
@@ -144,6 +146,13 @@ def test_agents_halted_mid_run_begin_again_and_estimate_the_load_as_well() -> No
         assert abs(est.moment - truth.moment) / truth.moment < 1e-3
         c = truth.contact_to_com[a.robot - 1]
         assert abs(est.contact_to_com[0] - c[0]) < 2e-3 and abs(est.contact_to_com[1] - c[1]) < 2e-3
+    # The dashboard's table says the team began again.
+    state = TeamState("rejoin", LoadGeometry.from_scenario(scenario))
+    state.ingest(truth, truth.time_s)
+    for a in agents:
+        state.ingest(a.estimates(), truth.time_s)
+    rows = state.page_scene(truth.time_s)["table"]["robots"]
+    assert len(rows) == 4 and {row["generation"] for row in rows.values()} == {1}
 
 
 def _stepped(robot: int, ticks: int):
