@@ -132,11 +132,16 @@ by the launcher at once, so a long wait costs nothing when something fails."""
 LOG = logging.getLogger("heft.launcher")
 
 
-def robot_toml(
-    robot: int, scenario: Scenario, team: str, clock: str, router: str, faults: FaultSettings
-) -> str:
-    """The ``robot.toml`` of one robot of ``scenario``."""
-    config = AgentNodeConfig(
+def robot_config(
+    robot: int,
+    scenario: Scenario,
+    team: str,
+    clock: str,
+    zenoh: ZenohSettings,
+    faults: FaultSettings | None = None,
+) -> AgentNodeConfig:
+    """The agent config of one robot of ``scenario`` whose session is ``zenoh``."""
+    return AgentNodeConfig(
         robot=robot,
         n=scenario.n,
         neighbours=scenario.neighbours(robot),
@@ -144,10 +149,18 @@ def robot_toml(
         period_s=scenario.period_s,
         seed=scenario.run.seed,
         clock=clock,
-        zenoh=ZenohSettings(mode="client", connect=(router,)),
-        faults=faults,
+        zenoh=zenoh,
+        faults=faults or FaultSettings(),
         tuning=scenario.agent,
     )
+
+
+def robot_toml(
+    robot: int, scenario: Scenario, team: str, clock: str, router: str, faults: FaultSettings
+) -> str:
+    """The ``robot.toml`` of one robot of ``scenario``, a client of ``router``."""
+    zenoh = ZenohSettings(mode="client", connect=(router,))
+    config = robot_config(robot, scenario, team, clock, zenoh, faults)
     return to_toml(config, f"Agent of robot {robot} of scenario {scenario.name!r}, by heft run.")
 
 
@@ -212,9 +225,10 @@ class Collector:
         to hear who was lost."""
         self.generation = 0
         """The team's newest generation heard (:mod:`agent.coordination`)."""
-        self.rejoins: list[dict[str, int]] = []
-        """Each new beginning: the tick the team halted at and the tick it began again."""
-        self.halted_tick = 0
+        self.rejoins: list[dict[str, int | None]] = []
+        """Each new beginning: the tick the team halted at (``None``: its halt was not heard,
+        e.g. the router was down) and the tick it began again."""
+        self.halted_tick: int | None = None
         self.record_every = record_every
         self.rejects = RejectLog(LOG, "launcher")
         self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
@@ -327,7 +341,7 @@ class Collector:
                 LOG.info("the team began again (generation %d)", message.generation)
                 began = message.phase_since if isinstance(message, Estimates) else message.tick
                 self.rejoins.append({"halted": self.halted_tick, "began": began})
-                self.halted = False
+                self.halted, self.halted_tick = False, None
                 self.lost.clear()
                 self.done_since.clear()
                 self.phase_ticks = {p: t for p, t in self.phase_ticks.items() if p == "halted"}

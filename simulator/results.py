@@ -383,7 +383,8 @@ def results_dict(outcome: RunOutcome) -> dict[str, Any]:
 def network_dict(outcome: RunOutcome) -> dict[str, Any] | None:
     """A run over Zenoh: each tick's command latency as the plant measured it (publishing the
     tick to receiving its command: p50, p99, ms) and each time the team halted and began
-    again (``halted_s``, ``began_s``); ``None`` in one process."""
+    again (``halted_s``, null when the halt was not heard, e.g. the router was down;
+    ``began_s``); ``None`` in one process."""
     plant = outcome.transport.get("plant")
     if plant is None:
         return None
@@ -395,7 +396,10 @@ def network_dict(outcome: RunOutcome) -> dict[str, Any] | None:
             "samples": plant.get("latency_samples"),
         },
         "rejoins": [
-            {"halted_s": r["halted"] * period, "began_s": r["began"] * period}
+            {
+                "halted_s": None if r["halted"] is None else r["halted"] * period,
+                "began_s": r["began"] * period,
+            }
             for r in outcome.transport.get("rejoins", [])
         ],
     }

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from agent.protocol import Control, Keys, encode
@@ -35,10 +34,9 @@ from agent.zenoh_session import ZenohSettings, open_session
 
 if TYPE_CHECKING:  # (the command line reads this module's defaults: it stays light)
     from simulator.inprocess import RunOutcome
-    from simulator.launcher import Collector, Verdict
+    from simulator.launcher import Collector, Progress, Verdict
     from simulator.scenario import Scenario
 
-Progress = Callable[[float, str], None]
 START_TIMEOUT_S = 60.0
 """How long the watcher waits for the plant's first truth."""
 STALL_S = 15.0

@@ -19,9 +19,9 @@ import pytest
 
 from agent.children import stop_all
 from agent.config import to_toml
-from agent.node import AgentNodeConfig
 from agent.protocol import Phase, PlantStatus, Status, Truth
 from agent.zenoh_session import ZenohSettings
+from simulator.launcher import robot_config
 from simulator.scenario import load_scenario
 from tests.conftest import ROOT
 from tests.multihost import Hosts, netns_available
@@ -96,26 +96,16 @@ class Network:
         return self.hosts.start("router", "router", args)
 
     def robot_config(self, i: int) -> Path:
-        s = self.scenario
         identity = f"robot-{i}"
-        config = AgentNodeConfig(
-            robot=i,
-            n=s.n,
-            neighbours=s.neighbours(i),
-            team=TEAM,
-            period_s=s.period_s,
-            seed=s.run.seed,
-            clock="realtime",
-            zenoh=ZenohSettings(
-                mode="client",
-                connect=(self.router,),
-                lease_ms=tomllib.loads(DEPLOYED.read_text("utf-8"))["zenoh"]["lease_ms"],
-                root_ca=str(self.certs / "ca.pem"),
-                certificate=str(self.certs / f"{identity}.pem"),
-                private_key=str(self.certs / f"{identity}-key.pem"),
-            ),
-            tuning=s.agent,
+        zenoh = ZenohSettings(
+            mode="client",
+            connect=(self.router,),
+            lease_ms=tomllib.loads(DEPLOYED.read_text("utf-8"))["zenoh"]["lease_ms"],
+            root_ca=str(self.certs / "ca.pem"),
+            certificate=str(self.certs / f"{identity}.pem"),
+            private_key=str(self.certs / f"{identity}-key.pem"),
         )
+        config = robot_config(i, self.scenario, TEAM, "realtime", zenoh)
         path = self.folder / f"{identity}.toml"
         path.write_text(to_toml(config, f"Agent of {identity}, multi-host test."), "utf-8")
         return path
@@ -207,7 +197,7 @@ def _dashboard_summary(network: Network, port: int) -> dict:
     return json.loads(done.stdout)
 
 
-def _wait_for_tick(record_log: Path, hosts: Hosts, tick_s: float, timeout_s: float = 90.0):
+def _wait_for_tick(hosts: Hosts, tick_s: float, timeout_s: float = 90.0):
     """Wait until the plant has run ``tick_s`` simulated seconds (its log says when it
     started; real time from then on)."""
     deadline = time.monotonic() + timeout_s
@@ -307,7 +297,7 @@ def _fault_rejoined(network: Network, folder: Path, fault, what: str) -> None:
     again, and converges within the bounds; nothing recorded is lost."""
     record, results = folder / "run.mcap", folder / "results.json"
     watcher = network.start_run(record, results)
-    _wait_for_tick(record, network.hosts, 3.0)
+    _wait_for_tick(network.hosts, 3.0)
     struck_ns = time.time_ns()
     fault()
     document = _finish(network, watcher, results)
@@ -345,7 +335,7 @@ def test_an_agent_killed_and_restarted_rejoins(network: Network, tmp_path: Path)
 def test_a_router_restart_is_survived(network: Network, tmp_path: Path):
     record, results = tmp_path / "run.mcap", tmp_path / "results.json"
     watcher = network.start_run(record, results)
-    _wait_for_tick(record, network.hosts, 3.0)
+    _wait_for_tick(network.hosts, 3.0)
     router = next(c for c in network.hosts.children if c.name == "router")
     router.process.terminate()
     router.process.wait(timeout=10)
@@ -372,7 +362,7 @@ def test_ten_thousand_malformed_payloads_from_an_authenticated_robot(
     the plant in its last status), and the run converges."""
     record, results = tmp_path / "run.mcap", tmp_path / "results.json"
     watcher = network.start_run(record, results, stop=False)  # (stopped once all is counted)
-    _wait_for_tick(record, network.hosts, 1.0)
+    _wait_for_tick(network.hosts, 1.0)
     c = network.certs
     forger = network.hosts.start(
         "robot-2",

@@ -16,7 +16,7 @@ from dashboard.state import TeamState
 from simulator.inprocess import make_agents
 from simulator.plant import Plant
 from simulator.scenario import load_scenario
-from tests.conftest import ROOT
+from tests.conftest import ROOT, FakeFifo
 
 PAPER = ROOT / "simulator" / "scenarios" / "paper.toml"
 
@@ -183,3 +183,46 @@ def test_an_agent_caught_up_past_step_1_halts_that_generation() -> None:
     command, share = agent.step(Measurement(2, 51, 0.51, (0.0, 0.0), (0.0, 0.0)), [late])
     assert (agent.phase, agent.generation) == (Phase.HALTED, 1)
     assert command.force == (0.0, 0.0) and share.phase == Phase.HALTED
+
+
+class _Session:
+    """Enough of a Zenoh session for the launcher's collector: its subscriptions by key."""
+
+    def __init__(self) -> None:
+        self.fifos: dict[str, FakeFifo] = {}
+
+    def declare_subscriber(self, key, handler):
+        self.fifos[key] = FakeFifo()
+        return self.fifos[key]
+
+
+def test_the_collector_follows_the_generations_of_a_team_that_begins_again() -> None:
+    from agent.protocol import Estimates, Keys, Status
+    from simulator.launcher import Collector
+
+    keys = Keys("t")
+    session = _Session()
+    collector = Collector(session, keys, 2, 5, rejoin_s=30.0)
+
+    def say(message) -> None:
+        status = isinstance(message, Status)
+        fifo = session.fifos[keys.all_statuses() if status else keys.all_estimates()]
+        fifo(type("Sample", (), {"payload": _Bytes(encode(message))})())
+        collector.drain(0.0)
+
+    say(Status(1, 400, Phase.HALTED, lost_neighbours=(2,)))
+    assert collector.halted and collector.lost == {2}
+    say(Estimates(1, 650, Phase.EXCITE, phase_since=651, generation=1))
+    assert not collector.halted and collector.lost == set() and collector.generation == 1
+    say(Status(2, 660, Phase.HALTED))  # of the old generation: late, ignored
+    assert not collector.halted
+    say(Estimates(2, 900, Phase.EXCITE, phase_since=901, generation=2))  # its halt unheard
+    assert collector.rejoins == [{"halted": 400, "began": 651}, {"halted": None, "began": 901}]
+
+
+class _Bytes:
+    def __init__(self, data: bytes) -> None:
+        self._data = data
+
+    def to_bytes(self) -> bytes:
+        return self._data
