@@ -29,6 +29,7 @@ from collections.abc import Iterable
 
 from agent.config import AgentConfig
 from agent.estimation.geometry import Vec2
+from agent.estimation.rotation import wrapped
 from agent.inbox import HISTORY_TICKS, Inbox
 from agent.phase_machine import PhaseMachine
 from agent.pipeline import EstimationPipeline
@@ -150,6 +151,10 @@ class Agent:
             gain_spread=consensus.gain_spread,
             epoch=barrier.epoch,
             generation=barrier.generation,
+            rotation=wrapped(pipeline.rotation.level),
+            rotation_variance=pipeline.rotation.variance,
+            mass_information=consensus.mass_information,
+            mass_weighted=consensus.mass_weighted,
         )
         before = k - HISTORY_TICKS
         inbox.forget(before)

@@ -564,6 +564,11 @@ class AgentTuning:
     """s: with ``estimator = "robust"``, Step 4 speeds up for this long, then brakes for as
     long, in turn (at most ``inertia_flip_s`` × the load's angular acceleration above the
     turn it had: keep it below ``inertia_max_omega``)."""
+    inertia_brake_s: float = bounded(0.0, 0, 60, "s")
+    """s: with ``estimator = "robust"``, Step 4 first brakes for this long. Half of
+    ``inertia_flip_s`` makes ω swing about the turn the load had, by half as much as speeding
+    up first: for compact, light loads, whose turn would leave the floor; a slower turn gives
+    Step 1's direction filters less signal. 0: speed up first."""
     push_fbar: float = bounded(1.0, 0, 1000, "rad/s² per m", open_low=True)
     """f̄_y (rad/s² per m) of Steps 5–7: each robot pushes with ``f = f̄_y Ĵ / n`` (Sec. VI) ..."""
     push_min_force: float = bounded(1.0, 0, 1000, "N", open_low=True)

@@ -39,7 +39,10 @@ The force laws:
   predicted from its last measurement, the torque applied since and ``Ĵ``: without noise every
   robot predicts the same value, so they all reverse at the same tick. With ``estimator =
   "robust"`` the robots' ω differ by their noise, so the torque instead speeds up for
-  ``inertia_flip_s`` and brakes for as long, in turn, from the agreed tick on;
+  ``inertia_flip_s`` and brakes for as long, in turn, from the agreed tick on (after braking
+  first for ``inertia_brake_s``: with half a flip, ω swings about the turn the load had, by
+  half of what speeding up first adds to it, which keeps a compact, light load's turn on its
+  floor);
 - *push*: the common force ``f = max(f̄_y Ĵ/n, push_min_force)`` along ``push_direction``, at
   most ``max_force`` (eq. 17 and Sec. VI, ``f_y = J/n`` for ``f̄_y = 1``); with ``estimator =
   "robust"`` the configured ``push_force``, the same for every robot whatever its Ĵ. The paper
@@ -133,6 +136,7 @@ class PhaseMachine:
         self.inertia_min_ticks = round(tuning.inertia_min_s / self.dt)
         self.robust = tuning.estimator == Estimators.ROBUST
         self.flip_ticks = round(tuning.inertia_flip_s / self.dt)
+        self.brake_ticks = round(tuning.inertia_brake_s / self.dt)
         self.spin_sign = 0.0
         """``sign(ω)`` when the inertia phase began: the torque first speeds that turn up."""
         self.inertia_gain = 0.0
@@ -289,10 +293,11 @@ class PhaseMachine:
     def _inertia_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         """Eq. (14) with the torque's sign for tick ``k`` (records the team's torque)."""
         if self.robust:
-            # Speed up, then brake as long, from the agreed tick on: every robot takes the
-            # same decisions whatever the noise on its ω.
-            flips = (k - self.since) // max(1, self.flip_ticks)
-            self.direction = 1.0 if flips % 2 == 0 else -1.0
+            # Speed up, then brake as long (after braking for inertia_brake_s), from the
+            # agreed tick on: every robot takes the same decisions whatever the noise on its ω.
+            since = k - self.since - self.brake_ticks
+            flips = since // max(1, self.flip_ticks)
+            self.direction = 1.0 if since >= 0 and flips % 2 == 0 else -1.0
         else:
             # Speed the turn up until |ω| reaches the limit, then brake down to half of it.
             speed = abs(self.omega_at(k, own))

@@ -102,14 +102,21 @@ class Share:
     - ``gain``, ``gain_centroid``, ``gain_spread``: the sender's average-consensus states for
       the drives' gains: their mean ``ḡ``, ``Σ g_i z_i / n`` (in ``W`` at ``instant``) and
       ``Σ g_i ‖z_i‖² / n`` (see :mod:`agent.estimation.centroid`).
-    - ``flows``: ``(j, F_x, F_y, F_s, F_g, F_hx, F_hy, F_q)`` per neighbour ``j``: the sender's
-      outflows of the iterations on edge ``(sender, j)`` (see :mod:`agent.estimation.flows`).
+    - ``flows``: ``(j, F_x, F_y, F_s, F_g, F_hx, F_hy, F_q, F_ι, F_μ)`` per neighbour ``j``:
+      the sender's outflows of the iterations on edge ``(sender, j)`` (see
+      :mod:`agent.estimation.flows`).
     - ``phase``, ``ready``, ``switch_at``, ``epoch``: the team's phase barrier (see
       :mod:`agent.coordination`): the sender's phase, the bitmask of robots known to be ready
       to leave it, the agreed tick of the switch (``-1`` while none is agreed), and how many
       times the team has restarted for a changed load.
     - ``generation``: how many times the team has begun again after a halt (every robot back:
       see :mod:`agent.coordination`); its ticks count from then on as from the start.
+    - ``rotation``: the sender's level of the load's rotation at ``instant`` (rad, modulo
+      ``2π``: see :mod:`agent.estimation.rotation`); ``rotation_variance``, its consensus
+      state ``ν`` for the robots' mean turn variance (rad²).
+    - ``mass_information``, ``mass_weighted``: the sender's average-consensus states ``ι`` and
+      ``μ`` for the team's mass (the robots' mass fits' information and information-weighted
+      mean, :mod:`agent.estimation.centroid`).
     """
 
     sender: int
@@ -121,13 +128,19 @@ class Share:
     phase: Phase = Phase.EXCITE
     ready: int = 0
     switch_at: int = -1
-    flows: tuple[tuple[int, float, float, float, float, float, float, float], ...] = ()
+    flows: tuple[
+        tuple[int, float, float, float, float, float, float, float, float, float], ...
+    ] = ()
     instant: int = -1
     gain: float = 1.0
     gain_centroid: Vec2 = (0.0, 0.0)
     gain_spread: float = 0.0
     epoch: int = 0
     generation: int = 0
+    rotation: float = 0.0
+    rotation_variance: float = 0.0
+    mass_information: float = 0.0
+    mass_weighted: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -444,7 +457,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 6
+WIRE_VERSION = 7
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -455,10 +468,10 @@ class DecodeError(ValueError):
 
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqHHB")
-_FLOW = _struct.Struct("<H7d")
-_FLOW_FIELDS = 8
-"""A flow: the neighbour, then :data:`agent.estimation.flows.Flow`'s seven numbers."""
+_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqHHddddB")
+_FLOW = _struct.Struct("<H9d")
+_FLOW_FIELDS = 10
+"""A flow: the neighbour, then :data:`agent.estimation.flows.Flow`'s nine numbers."""
 _CLOCK = _struct.Struct("<qd")
 _ESTIMATES = _struct.Struct("<HqBqHBBBBHH")
 """robot, tick, phase, phase_since, which optional values follow (bit per
@@ -547,6 +560,10 @@ def encode(message: object) -> bytes:
             m.instant,
             m.epoch,
             m.generation,
+            m.rotation,
+            m.rotation_variance,
+            m.mass_information,
+            m.mass_weighted,
             len(m.flows),
         )
         return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
@@ -728,6 +745,9 @@ MAX_DISTANCE = 10_000.0
 """m, a position or offset shared between agents."""
 MAX_FLOW = 1e9
 """What has flowed on an edge of the consensus iterations (m, m² and gains)."""
+MAX_TURN_VARIANCE = 100.0
+"""rad²: a robot's turn's variance over one instant, or the team's mean as a consensus state
+(a turn measured from ``ż``'s direction alone has at most 1e-3)."""
 MAX_GAIN = 100.0
 """A drive's gain, or the team's mean gain as a consensus state."""
 MAX_EPOCH = 10_000
@@ -775,6 +795,10 @@ def _share(m: Share) -> None:
     _within("share.switch_at", m.switch_at, -1, MAX_TICK)
     _within("share.epoch", m.epoch, 0, MAX_EPOCH)
     _within("share.generation", m.generation, 0, MAX_GENERATION)
+    _within("share.rotation", m.rotation, -_math.pi, _math.pi)
+    _within("share.rotation_variance", m.rotation_variance, -MAX_TURN_VARIANCE, MAX_TURN_VARIANCE)
+    _within("share.mass_information", m.mass_information, -MAX_FLOW, MAX_FLOW)
+    _within("share.mass_weighted", m.mass_weighted, -MAX_FLOW, MAX_FLOW)
     _within("share.instant", m.instant, -1, m.tick - 1)
     _within("share.flows (how many)", len(m.flows), 0, m.degree)
     _within("share.gain", m.gain, -MAX_GAIN, MAX_GAIN)
@@ -928,7 +952,8 @@ def _decode(kind: type, payload: bytes):
         fixed = body[: _SHARE.size]
         values = _unpack(_SHARE, fixed, "share")
         s, t, vx, vy, deg, has, cx, cy, spread, gain, hx, hy, q = values[:13]
-        phase, ready, switch_at, instant, epoch, generation, count = values[13:]
+        phase, ready, switch_at, instant, epoch, generation = values[13:19]
+        rotation, rotation_variance, iota, mu, count = values[19:]
         rest = body[_SHARE.size :]
         if len(rest) != count * _FLOW.size:
             raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
@@ -953,6 +978,10 @@ def _decode(kind: type, payload: bytes):
             q,
             epoch,
             generation,
+            rotation,
+            rotation_variance,
+            iota,
+            mu,
         )
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))

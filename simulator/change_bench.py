@@ -12,7 +12,9 @@ robust estimators) runs three times in this process:
 A change is *noticed* when the team restarts (:mod:`agent.coordination`) after it; the report
 gives how many were, within :data:`NOTICE_WITHIN_S` of the change, the delays, the errors after
 the re-estimation against the changed load's truth, the false alarms, and the runs that kept
-the floor.
+the floor. Beside the re-estimated load, the centralized reference (``heft baseline``'s batch
+fit, :func:`simulator.noise_bench.baseline_errors`) on the same run's measurements from the
+change to its end, which are all the changed load's, and the ratio of the two.
 """
 
 from __future__ import annotations
@@ -23,8 +25,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from agent.config import Estimators
+from agent.protocol import Measurement
 from simulator.inprocess import run_inprocess
-from simulator.noise_bench import NoiseSettings, noisy
+from simulator.noise_bench import NoiseSettings, baseline_errors, noisy
 from simulator.results import errors, floor_check, load_changes
 from simulator.scenario import LoadChange, Scenario
 
@@ -50,6 +53,8 @@ class ChangeResult:
     errors: dict[str, float | None]
     converged: bool
     on_floor: bool
+    baseline: dict[str, float | None] = dataclasses.field(default_factory=dict)
+    """The batch fit of the changed load (from the change on; empty for ``none``)."""
 
 
 def changed(scenario: Scenario, case: str) -> Scenario:
@@ -72,8 +77,17 @@ def run_case(scenario: Scenario, settings: NoiseSettings, seed: int, case: str) 
     """Seed ``seed`` of ``scenario`` (noisy, robust) with ``case``'s change."""
     base = noisy(scenario, settings, seed, Estimators.ROBUST)
     run = dataclasses.replace(base.run, max_time_s=max(base.run.max_time_s, 90.0))
-    outcome = run_inprocess(changed(dataclasses.replace(base, run=run), case), record_every=10)
+    measured: list[list[Measurement]] = []
+    outcome = run_inprocess(
+        changed(dataclasses.replace(base, run=run), case),
+        record_every=10,
+        on_measure=measured.append,
+    )
     found = load_changes(outcome)
+    reference = {}
+    if case != "none":
+        since = round(CHANGE_AT_S / outcome.scenario.period_s)
+        reference = baseline_errors(outcome, measured, settings, since_tick=since)
     latency = found["changes"][0]["latency_s"] if found["changes"] else None
     return ChangeResult(
         seed=seed,
@@ -83,6 +97,7 @@ def run_case(scenario: Scenario, settings: NoiseSettings, seed: int, case: str) 
         errors=errors(outcome),
         converged=outcome.converged,
         on_floor=floor_check(outcome)["within"],
+        baseline=reference,
     )
 
 
@@ -142,8 +157,33 @@ def format_change_report(results: Sequence[ChangeResult]) -> str:
             f" {delay:>14} {_pct(m):>7} {_pct(j):>7} {_mm(ctc):>8}"
             f" {alarms:>6} {floors:>3}/{len(rows)}"
         )
+    lines.append("")
     lines.append(
-        f"(median errors against the truth at the end, after any re-estimation; goal: every"
+        f"{'changed load':<13} {'m':>7} {'J':>7} {'ctc':>8}"
+        f"   {'fit m':>7} {'fit J':>7} {'fit ctc':>8}   ratios m / J / ctc"
+    )
+    for case in CASES[:2]:
+        rows = [r for r in results if r.case == case]
+        if not rows:
+            continue
+        ours = [
+            _median([r.errors.get(key) for r in rows])
+            for key in ("mass_rel", "moment_rel", "contact_to_com_m")
+        ]
+        fits = [
+            _median([r.baseline.get(key) for r in rows])
+            for key in ("mass", "moment", "contact_to_com")
+        ]
+        ratios = " / ".join(
+            "-" if a is None or not b else f"{a / b:.2f}" for a, b in zip(ours, fits)
+        )
+        lines.append(
+            f"{case:<13} {_pct(ours[0]):>7} {_pct(ours[1]):>7} {_mm(ours[2]):>8}"
+            f"   {_pct(fits[0]):>7} {_pct(fits[1]):>7} {_mm(fits[2]):>8}   {ratios}"
+        )
+    lines.append(
+        f"(median errors against the truth at the end, after any re-estimation; the fit: the"
+        f" centralized batch fit of the run's measurements from the change on; goal: every"
         f" change noticed within {NOTICE_WITHIN_S:g} s, no false alarm, every run done and"
         f" on its floor)"
     )

@@ -576,6 +576,7 @@ def _bench_noise(args: argparse.Namespace) -> int:
     from simulator.benchmark import PAPER_SCENARIO
     from simulator.generate import generate_scenario
     from simulator.noise_bench import (
+        GENERATED_INERTIA_BRAKE_S,
         GENERATED_PUSH_DAMPING,
         NoiseSettings,
         format_noise_report,
@@ -623,7 +624,11 @@ def _bench_noise(args: argparse.Namespace) -> int:
 
     settings = dataclasses.replace(NoiseSettings(), seeds=seeds)
     if args.generated is not None:
-        settings = dataclasses.replace(settings, push_damping=GENERATED_PUSH_DAMPING)
+        settings = dataclasses.replace(
+            settings,
+            push_damping=GENERATED_PUSH_DAMPING,
+            inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
+        )
     if args.ideal_drives:
         settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
     if args.sweep:

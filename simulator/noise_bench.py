@@ -55,6 +55,11 @@ GENERATED_PUSH_DAMPING = 2.0
 """N s/m: :attr:`NoiseSettings.push_damping` for the generated scenarios, whose loads (1 to
 50 kg, 3 to 8 robots) under one push force would otherwise swing by up to ``n f T/2m`` =
 16 m/s; with it, the COM's speed stays within about ``f / b`` = 1 m/s."""
+GENERATED_INERTIA_BRAKE_S = 0.5
+"""s: :attr:`NoiseSettings.inertia_brake_s` for the generated scenarios: Step 4 brakes first
+for half of its 1 s flip, so that ω swings about the turn the load had; speeding up first, a
+compact light load (``J`` of 1.6 kg m² under 7 robots) turned at up to 2.75 rad/s, beyond its
+floor's 2 rad/s."""
 SWEEP = (0.0, 0.001, 0.003, 0.01, 0.03)
 """σ_v (m/s) of the sweep; σ_f = 50 σ_v."""
 
@@ -81,6 +86,10 @@ class NoiseSettings:
     """s: how often the push reverses, for both estimators: against noise, the COM's
     displacement, ``n f T²/8m``, is the mass's signal; the speed it swings by, ``n f T/2m``,
     is bounded by the floor."""
+    inertia_brake_s: float = 0.0
+    """s: the robust estimators' first braking in Step 4 (``heft bench --noise --generated``
+    sets :data:`GENERATED_INERTIA_BRAKE_S`; the paper's scenario speeds up first: its ``|ω|``
+    stays within 1 rad/s, and its ``z_ij`` are better for the faster turn)."""
     push_damping: float = 0.0
     """N s/m: the robust estimators' damping of the centroid's velocity during the push
     (``heft bench --noise --generated`` sets :data:`GENERATED_PUSH_DAMPING`). The paper's
@@ -131,6 +140,7 @@ def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Est
             push_force=settings.push_force,
             push_flip_s=settings.push_flip_s,
             push_damping=settings.push_damping,
+            inertia_brake_s=settings.inertia_brake_s,
         ),
     )
 
@@ -145,16 +155,20 @@ def _worst(outcome: RunOutcome) -> dict[str, float | None]:
     }
 
 
-def _baseline_errors(
-    outcome: RunOutcome, measured: list[list[Measurement]], settings: NoiseSettings
+def baseline_errors(
+    outcome: RunOutcome,
+    measured: list[list[Measurement]],
+    settings: NoiseSettings,
+    since_tick: int = 0,
 ) -> dict[str, float | None]:
-    """The batch fit on the run's measurements up to its final instant, against the truth
+    """The batch fit on the run's measurements from ``since_tick`` (at most
+    :data:`~simulator.baseline.MAX_TICKS` of them) up to its final instant, against the truth
     then (``None`` everywhere if the fit fails)."""
     from simulator.baseline import MAX_TICKS, fit
 
     truth = outcome.final.truth
     last = min(truth.tick, len(measured) - 1)
-    first = max(0, last + 1 - MAX_TICKS)
+    first = max(since_tick, last + 1 - MAX_TICKS)
     ticks = measured[first : last + 1]
     v = np.array([[m.velocity for m in tick] for tick in ticks])
     f = np.array([[m.force for m in tick] for tick in ticks])
@@ -208,7 +222,7 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
         seed=seed,
         robust=_worst(robust),
         paper=_worst(paper),
-        baseline=_baseline_errors(robust, measured, settings),
+        baseline=baseline_errors(robust, measured, settings),
         robust_time_s=robust.sim_time_s,
         robust_done=robust.converged,
         paper_done=paper.converged,

@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.estimation.angular_velocity import angular_velocity
-from agent.estimation.centroid import CentroidConsensus
+from agent.estimation.centroid import MAX_MASS_INFORMATION, CentroidConsensus, mass_input
 from agent.estimation.com_observer import ComObserver
 from agent.estimation.com_regression import ComRegression
 from agent.estimation.com_velocity import com_velocity
@@ -485,10 +485,12 @@ def message(i: int, t: int, c: CentroidConsensus) -> Share:
         gain=c.gain,
         gain_centroid=c.gain_centroid,
         gain_spread=c.gain_spread,
+        mass_information=c.mass_information,
+        mass_weighted=c.mass_weighted,
     )
 
 
-def run_consensus(p, edges, rounds, turn=0.0, lost=frozenset(), gains=None):
+def run_consensus(p, edges, rounds, turn=0.0, lost=frozenset(), gains=None, masses=None):
     """The team's iterations: at instant ``t`` each robot hears its neighbours' messages of
     ``t − 1``, except ``(t, sender, receiver)`` in ``lost`` (it keeps the older one it has).
     Yields the team after each instant."""
@@ -497,6 +499,8 @@ def run_consensus(p, edges, rounds, turn=0.0, lost=frozenset(), gains=None):
     team = {i: CentroidConsensus(i, sorted(nb[i])) for i in range(n)}
     for i, c in team.items():
         c.gain_input = 1.0 if gains is None else gains[i]
+        if masses is not None:
+            c.mass_input = mass_input(*masses[i])
     frames = {i: TurningLoad(p, i, turn) for i in range(n)}
     heard = {i: {} for i in range(n)}
     sent = {}
@@ -555,6 +559,34 @@ def test_the_drives_gains_averages(lossy):
         assert c.gain_centroid == pytest.approx(tuple(h), abs=1e-9)
         assert c.gain_spread == pytest.approx(q, abs=1e-9)
     assert np.linalg.norm(h) > 0.01  # not the unweighted centroid's zero
+
+
+@pytest.mark.parametrize("lossy", [False, True])
+def test_the_team_mass_is_the_information_weighted_mean(lossy):
+    """Step 7's consensus on information: each robot's fit weighs by its inverse variance, and
+    the team's relative standard deviation is that of a robot of mean information."""
+    n, rounds = 5, 2000
+    p = np.random.default_rng(8).uniform(-3, 3, size=(n, 2))
+    fits = [(5.0, 0.05), (5.2, 0.1), (4.9, 0.025), (5.1, 0.05), (5.0, None)]  # kg, kg
+    edges = graph("path", n)
+    lost = _lossy(n, edges, rounds, 0.2, 9) if lossy else frozenset()
+    *_, team = run_consensus(p, edges, rounds, 0.0, lost, masses=fits)
+    info = [(0.01 * m / s) ** 2 if s else 0.0 for m, s in fits]
+    mean = sum(w * m for w, (m, _) in zip(info, fits)) / sum(info)
+    assert mean == pytest.approx(4.9633, abs=1e-4)  # nearest the surest fit, 4.9 ± 0.025
+    for c in team.values():
+        mass, rho = c.team_mass(5.0)
+        assert mass == pytest.approx(mean, abs=1e-9)
+        assert rho == pytest.approx(0.01 / math.sqrt(sum(info) / n), rel=1e-9)
+    # A state that is no weighted mean of the fits yet is not used.
+    assert team[0].team_mass(20.0) is None and team[0].team_mass(-1.0) is None
+
+
+def test_a_mass_fits_information_is_bounded() -> None:
+    assert mass_input(None, 0.1) == (0.0, 0.0) and mass_input(5.0, None) == (0.0, 0.0)
+    assert mass_input(5.0, 0.05) == pytest.approx((1.0, 5.0))  # 1 %: one unit
+    assert mass_input(5.0, 0.0) == (MAX_MASS_INFORMATION, 5.0 * MAX_MASS_INFORMATION)
+    assert mass_input(5.0, 1e-6)[0] == MAX_MASS_INFORMATION
 
 
 def _lossy(n, edges, rounds, probability, seed):
@@ -650,7 +682,7 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
         velocity=(0, 0),
         degree=1,
         spread=2.0,
-        flows=((0, 0.5, -1.0, 0.25, 0.0, 0.0, 0.0, 0.0),),
+        flows=((0, 0.5, -1.0, 0.25, *[0.0] * 6),),
         instant=t - 2,
     )
     c.update(phi, {1: theirs}, frame, 0.01)

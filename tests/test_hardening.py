@@ -327,7 +327,7 @@ adversarial = st.one_of(
         phase=st.sampled_from(Phase),
         ready=st.integers(0, 2**64 - 1),
         switch_at=ticks,
-        flows=st.lists(st.tuples(ids, *[finite] * 7), max_size=4).map(tuple),
+        flows=st.lists(st.tuples(ids, *[finite] * 9), max_size=4).map(tuple),
         instant=ticks,
     ),
 )

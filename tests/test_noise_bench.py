@@ -98,3 +98,29 @@ def test_bench_noise_options(args: list[str], message: str) -> None:
     )
     assert done.returncode == 2, done.stderr
     assert message in done.stderr and "Traceback" not in done.stderr
+
+
+def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:
+    from simulator.change_bench import ChangeResult, format_change_report
+
+    def row(seed: int, case: str, mass: float) -> ChangeResult:
+        return ChangeResult(
+            seed=seed,
+            case=case,
+            latency_s=None if case == "none" else 1.5,
+            false_alarms=0,
+            errors={"mass_rel": mass, "moment_rel": 0.005, "contact_to_com_m": 0.006},
+            converged=True,
+            on_floor=True,
+            baseline={}
+            if case == "none"
+            else {"mass": 0.004, "moment": 0.01, "contact_to_com": 0.012},
+        )
+
+    results = [row(s, c, 0.006 + 0.001 * s) for s in range(3) for c in ("mass", "com", "none")]
+    report = format_change_report(results)
+    lines = {line.split()[0]: line for line in report.splitlines() if line.strip()}
+    # Median re-estimated mass 0.7 % against the fit's 0.4 %: 1.75; J 0.5; ctc 0.5.
+    assert lines["mass"].endswith("1.75 / 0.50 / 0.50")
+    assert "0.40%" in lines["com"] and "12.0mm" in lines["com"]
+    assert report.splitlines()[-1] == "goals: met"

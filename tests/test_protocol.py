@@ -99,7 +99,10 @@ SHARE_FLOWS = Share(
     phase=1,
     ready=2**64 - 1,
     switch_at=-1,
-    flows=((2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3), (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3)),
+    flows=(
+        (2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3, 4.0, 20.0),
+        (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3, 0.0, -1.0),
+    ),
     gain=1.02,
     gain_centroid=(0.04, -0.01),
     gain_spread=2.5,
@@ -288,13 +291,17 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         phase=st.sampled_from(Phase),
         ready=st.integers(0, 2**64 - 1),
         switch_at=ticks,
-        flows=st.lists(st.tuples(ids, *[numbers] * 7), max_size=8).map(tuple),
+        flows=st.lists(st.tuples(ids, *[numbers] * 9), max_size=8).map(tuple),
         gain=st.floats(-100.0, 100.0),
         gain_centroid=pairs,
         gain_spread=numbers,
         instant=ticks,
         epoch=st.integers(0, 10_000),
         generation=st.integers(0, 10_000),
+        rotation=st.floats(-math.pi, math.pi),
+        rotation_variance=st.floats(0.0, 100.0),
+        mass_information=numbers,
+        mass_weighted=numbers,
     )
     maybe = lambda strategy: st.none() | strategy  # noqa: E731
     # (xx, ρ √(xx yy), yy): a covariance whenever xx, yy ≥ 0; anything, from anything.
@@ -385,7 +392,7 @@ DOMAIN_CASES = {
     "estimates with a negative drive gain": Estimates(1, 3, Phase.DONE, drive_gain=-1.0),
     "estimates with a negative gain std": Estimates(1, 3, Phase.DONE, drive_gain_std=-0.1),
     "share with more flows than neighbours": Share(
-        2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * 7), (3, *[0.0] * 7))
+        2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * 9), (3, *[0.0] * 9))
     ),
     "share centroid 1e5 m away": Share(2, 3, (0.0, 0.0), 1, centroid=(1e5, 0.0)),
 }
@@ -509,8 +516,8 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
         _with(SHARE_PLAIN, velocity=(bad, 0.0)),
         _with(SHARE_PLAIN, spread=bad),
         _with(SHARE_CENTROID, centroid=(0.0, bad)),
-        _with(SHARE_FLOWS, flows=((2, 0.5, bad, 1.0, 0.0, 0.0, 0.0, 0.0),)),
-        _with(SHARE_FLOWS, flows=((2, *[0.5] * 7), (4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, bad))),
+        _with(SHARE_FLOWS, flows=((2, 0.5, bad, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),)),
+        _with(SHARE_FLOWS, flows=((2, *[0.5] * 9), (4, *[0.0] * 8, bad))),
         _with(SHARE_FLOWS, gain=bad),
         _with(SHARE_FLOWS, gain_centroid=(0.0, bad)),
         _with(ESTIMATES_FULL, mass=bad),
@@ -526,8 +533,8 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
 
 
 def test_share_flow_count_must_match_its_bytes() -> None:
-    payload = encode(SHARE_FLOWS)  # two flows of 58 bytes each, the count in the last fixed byte
-    flow = struct.calcsize("<H7d")
+    payload = encode(SHARE_FLOWS)  # two flows of 74 bytes each, the count in the last fixed byte
+    flow = struct.calcsize("<H9d")
     fixed = len(payload) - 2 * flow
     assert payload[fixed - 1] == 2
     rejects(Share, payload[:-flow])  # one flow's bytes, count 2

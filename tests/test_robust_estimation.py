@@ -293,10 +293,11 @@ class _Own:
 
 
 def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -> None:
-    """Two robots whose ω differ by their noise reverse the torque at the same ticks."""
+    """Two robots whose ω differ by their noise reverse the torque at the same ticks: speeding
+    up and braking for a flip each, after braking for ``inertia_brake_s`` if it is set."""
     schedules = []
-    for omega in (0.49, 0.51):
-        tuning = AgentTuning(estimator=Estimators.ROBUST, inertia_flip_s=0.5)
+    for omega, brake in ((0.49, 0.0), (0.51, 0.0), (0.5, 0.25)):
+        tuning = AgentTuning(estimator=Estimators.ROBUST, inertia_flip_s=0.5, inertia_brake_s=brake)
         machine = PhaseMachine(AgentConfig(1, 4, (2,), DT, tuning=tuning))
         machine.entered[Phase.INERTIA] = 100
         machine.barrier.phase = Phase.INERTIA
@@ -306,9 +307,12 @@ def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -
         for k in range(100, 300):
             machine.force(k, own, (0.0, 0.0))
         torques = [machine._torque[k] for k in range(100, 300)]
+        if brake:
+            torques = torques[25:]  # braking first for 0.25 s
+            assert machine._torque[100] == -2.8 and machine._torque[124] == -2.8
         assert torques[:50] == [2.8] * 50 and torques[50:100] == [-2.8] * 50
-        schedules.append(torques)
-    assert schedules[0] == schedules[1]
+        schedules.append(torques[:175])
+    assert schedules[0] == schedules[1] == schedules[2]
 
 
 # ------------------------------------------------------------------------------ the push reverses

@@ -28,7 +28,9 @@ along all of it, as if there were a handful of independent samples, not ``N``. S
 Direction. ``s(t) − c`` carries the walk, which grows as ``√t``; the radius does not. So the
 direction ``ψ`` of ``z_ij`` is filtered on its own (a scalar Kalman filter): it turns by the
 arc's increment between samples (its process noise is the walk's step, ``σ_e Δt / (r √2)`` of
-angle: the trapezoid averages two samples), and each sample measures it without any walk:
+angle: the trapezoid averages two samples), or by the team's turn, which averages every edge's
+increments (:meth:`follow`, :mod:`agent.estimation.rotation`: its process noise is then a
+share of that step's), and each sample measures it without any walk:
 ``z_ij = −ż_ij⊥ / ω`` (eq. 10, the notes' correction) points along ``∓ż_ij⊥``, the sign that
 of the filter's prediction, with an angular noise of ``σ_e / ‖ż_ij‖`` (``σ_e²`` the
 relative velocity's noise variance per axis, measured from the samples' second differences:
@@ -90,7 +92,7 @@ class ArcRelativePosition:
         self._solution: Solution | None = None
         """The fit after the last sample used, once it determines the circle."""
 
-    def update(self, zdot: Vec2, dt: float) -> None:
+    def update(self, zdot: Vec2, dt: float, *, follow: bool = True) -> None:
         """Feed ``ż_ij`` sampled ``dt`` after the last sample used."""
         if math.hypot(zdot[0], zdot[1]) <= self.min_speed:
             self.moving = False
@@ -115,7 +117,8 @@ class ArcRelativePosition:
             self.last_turn = angle_between(
                 (before[0] - c[0], before[1] - c[1]), (sx - c[0], sy - c[1])
             )
-            self._filter_direction(zdot, dt)
+            if follow:
+                self.follow(self.last_turn)
         else:
             self.last_turn = turn  # ż_ij turns with z_ij
             self.direction = None
@@ -136,8 +139,15 @@ class ArcRelativePosition:
         total, count = self._second
         return total / (12.0 * count) if count else 0.0
 
-    def _filter_direction(self, zdot: Vec2, dt: float) -> None:
-        """One step of the direction filter (see the module docstring)."""
+    def follow(self, turn: float, variance: float | None = None) -> None:
+        """One step of the direction filter (see the module docstring) at the last sample
+        used: the direction turns by ``turn`` (rad) of variance ``variance`` (rad²; ``None``:
+        that of the arc's own increment, :attr:`last_turn`), then the sample measures it.
+        :meth:`update` calls it with the arc's own increment unless told not to
+        (``follow=False``: the caller then follows the team's turn)."""
+        if self.centre is None or not self.moving:
+            return
+        zdot, dt = self.zdot, self.last_dt
         r = self.distance
         c = self.centre
         arc = (self.s[0] - c[0], self.s[1] - c[1])
@@ -146,8 +156,9 @@ class ArcRelativePosition:
             self.direction_var = (self._arc_std / r) ** 2
             return
         noise = self.noise
-        self.direction += self.last_turn
-        self.direction_var += 0.5 * noise * dt * dt / (r * r)
+        self.direction += turn
+        own = 0.5 * noise * dt * dt / (r * r)
+        self.direction_var += own if variance is None else variance
         speed2 = zdot[0] * zdot[0] + zdot[1] * zdot[1]
         if noise <= 0.0 or speed2 <= 0.0:
             return

@@ -14,10 +14,12 @@ hearing from ``j`` takes ``F_ij = −F_ji``. The flows of an edge are then antis
 whatever was lost, so the sum holds: the iteration converges to the same point as without loss.
 Without loss the adopted flows equal one's own, and it is exactly the original iteration.
 
-Flows are ``(x, y, s, g, hx, hy, q)``: a 2-vector for the centroid (in ``W`` at the robot's
-current instant, turned with the load like the iterates), a scalar for ``w``, one for the
-drives' mean gain ``ḡ``, a 2-vector (turned likewise) for the gain-weighted centroid offsets'
-mean ``Σ g_i z_i / n`` and a scalar for ``Σ g_i ‖z_i‖² / n``.
+Flows are ``(x, y, s, g, hx, hy, q, ι, μ)``: a 2-vector for the centroid (in ``W`` at the
+robot's current instant, turned with the load like the iterates), a scalar for ``w``, one for
+the drives' mean gain ``ḡ``, a 2-vector (turned likewise) for the gain-weighted centroid
+offsets' mean ``Σ g_i z_i / n``, a scalar for ``Σ g_i ‖z_i‖² / n``, and two for the team's
+mass, the mean information ``ι`` of the robots' mass fits and their information-weighted mean
+``μ`` (:mod:`agent.estimation.centroid`).
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-Flow = tuple[float, float, float, float, float, float, float]
-ZERO: Flow = (0.0,) * 7
+Flow = tuple[float, float, float, float, float, float, float, float, float]
+ZERO: Flow = (0.0,) * 9
 
 
 class EdgeFlows:
@@ -40,7 +42,7 @@ class EdgeFlows:
         """Turn the vector parts with the load (they live in the co-rotating frame)."""
         self._c, self._s = c, s = math.cos(angle), math.sin(angle)
         if angle:
-            for j, (x, y, f, g, hx, hy, q) in self.flows.items():
+            for j, (x, y, f, g, hx, hy, q, i, mu) in self.flows.items():
                 self.flows[j] = (
                     c * x - s * y,
                     s * x + c * y,
@@ -49,6 +51,8 @@ class EdgeFlows:
                     c * hx - s * hy,
                     s * hx + c * hy,
                     q,
+                    i,
+                    mu,
                 )
 
     def turned(self, v: tuple[float, float]) -> tuple[float, float]:

@@ -9,8 +9,9 @@ linear in ``(θ₀, ω₀, 1/J)``: least squares on the rows ``[1, t − t₀, �
 ``Ĵ = 1/p₃``. A drive applies its command through a lag (``actuators.time_constant_s``): to
 first order the torque then acts ``τ_d`` late, ``Φ(t − τ_d) ≈ Φ(t) − τ_d Ω(t)`` with
 ``Ω = ∫τ``, so a fourth column ``Ω`` with the unknown ``−τ_d / J`` takes it up (zero for ideal
-drives). The angle ``θ`` is the rotation the agent tracks from its arc fits (Step 1, the
-sum of each instant's turn of ``z_ij``), whose error is millimetres over metres, where
+drives). The angle ``θ`` is the rotation the team tracks from its arc fits (Step 1, the
+sum of each instant's turn of the ``z_ij``, averaged over the team by
+:mod:`agent.estimation.rotation`), whose error is millimetres over metres, where
 eq. (5)'s instantaneous ``ω = (z_ij⊥)ᵀ ż_ij / ‖z_ij‖²`` carries the velocity noise of every
 sample. Between two instants ``h`` apart with a constant torque ``τ``, ``Φ`` grows by
 ``Ω h + τ h²/2`` and ``Ω = ∫τ`` by ``τ h``: exact for the piecewise-constant torque the team
