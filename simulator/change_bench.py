@@ -106,9 +106,10 @@ def run_change_bench(
     settings: NoiseSettings,
     on_result: Callable[[ChangeResult], None] | None = None,
 ) -> list[ChangeResult]:
-    """Every case on seeds ``0..settings.seeds − 1``."""
+    """Every case on the settings' seeds (:attr:`~simulator.noise_bench.NoiseSettings.
+    first_seed` on)."""
     results = []
-    for seed in range(settings.seeds):
+    for seed in range(settings.first_seed, settings.first_seed + settings.seeds):
         for case in CASES:
             result = run_case(scenario, settings, seed, case)
             results.append(result)

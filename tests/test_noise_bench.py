@@ -86,6 +86,8 @@ def test_one_seed_against_the_centralized_fit() -> None:
         (["--seeds", "3"], "--seeds needs --noise"),
         (["--noise", "--plot", "x"], "--plot needs --sweep"),
         (["--noise", "--seeds", "0"], "--seeds"),
+        (["--first-seed", "20"], "--first-seed needs --noise"),
+        (["--noise", "--first-seed", "-1"], "--first-seed"),
     ],
 )
 def test_bench_noise_options(args: list[str], message: str) -> None:
@@ -124,3 +126,14 @@ def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:
     assert lines["mass"].endswith("1.75 / 0.50 / 0.50")
     assert "0.40%" in lines["com"] and "12.0mm" in lines["com"]
     assert report.splitlines()[-1] == "goals: met"
+
+
+def test_the_seeds_run_start_at_first_seed(monkeypatch) -> None:
+    import simulator.noise_bench as bench
+
+    seen = []
+    monkeypatch.setattr(bench, "run_seed", lambda scenario, settings, seed: seen.append(seed))
+    bench.run_noise_bench(lambda seed: None, NoiseSettings(seeds=3, first_seed=20))
+    assert seen == [20, 21, 22]
+    report = format_noise_report([_result(20, 1.0), _result(21, 1.0)], NoiseSettings(), "x", 1.0)
+    assert "2 seeds (20-21)" in report.splitlines()[0]
