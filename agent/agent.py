@@ -151,7 +151,7 @@ class Agent:
             gain_spread=consensus.gain_spread,
             epoch=barrier.epoch,
             generation=barrier.generation,
-            rotation=wrapped(pipeline.rotation.level),
+            rotation=wrapped(pipeline.angle),
             rotation_variance=pipeline.rotation.variance,
             mass_information=consensus.mass_information,
             mass_weighted=consensus.mass_weighted,

@@ -97,7 +97,8 @@ class EstimationPipeline:
         self._angle_at: dict[int, float] = {}
         """``angle`` at each recent instant."""
         self.rotation = RotationConsensus(len(neighbours), config.n)
-        """The team's level of the load's rotation (the robust estimators' :attr:`angle`)."""
+        """The team's consensus on the load's rotation, whose level is :attr:`angle` (the
+        robust estimators')."""
         self.instant = -1
         """The estimation instant (``-1`` before any)."""
         self.angle = 0.0
@@ -184,11 +185,14 @@ class EstimationPipeline:
             return None
         if not self.robust:
             return self.mass_estimator.estimate
-        own, _ = self._own_mass()
-        if own is None:
-            return None
-        team = self.consensus.team_mass(own)
-        return own if team is None else team[0]
+        return self._robust_mass()[0]
+
+    def _robust_mass(self) -> tuple[float | None, float | None]:
+        """``(m̂, σ)``: the team's mass and its standard deviation, or this robot's own
+        (:meth:`_own_mass`) until the team's is known."""
+        own, std = self._own_mass()
+        team = None if own is None else self.consensus.team_mass(own)
+        return (own, std) if team is None else (team[0], team[0] * team[1])
 
     def _own_mass(self) -> tuple[float | None, float | None]:
         """This robot's robust mass fit scaled by the drives' mean gain ``ḡ``, and its
@@ -238,17 +242,16 @@ class EstimationPipeline:
             if d is not None and (ref is None or d > self.edges[ref].distance):
                 ref = j
         interval = (e - previous) * self.dt
+        turn = None  # else ω times the interval, ω of this instant if it is measured
         if self.robust:
             turn = self._team_turn(zdots, interval, inbox, (self.omega or 0.0) * interval)
+        elif ref is not None and abs(self.edges[ref].last_dt - interval) < 1e-9:
+            turn = self.edges[ref].last_turn
         if ref is not None:
-            edge = self.edges[ref]
-            self.omega = angular_velocity(edge.estimate, zdots[ref])
-            if not self.robust:
-                same = abs(edge.last_dt - interval) < 1e-9
-                turn = edge.last_turn if same else self.omega * interval
+            self.omega = angular_velocity(self.edges[ref].estimate, zdots[ref])
             self.started.setdefault(2, e)
             self.started.setdefault(3, e)
-        elif not self.robust:
+        if turn is None:
             turn = (self.omega or 0.0) * interval
         self.angle += turn
         self._angle_at[e] = self.angle
@@ -603,10 +606,7 @@ class EstimationPipeline:
         moment_std = self.inertia.std if self.inertia is not None else None
         if moment_std is not None:
             moment_std = math.hypot(moment_std * self._torque_gain, moment * team_gain_std)
-        own, mass_std = self._own_mass()
-        team = None if own is None else self.consensus.team_mass(own)
-        if team is not None:
-            mass_std = team[0] * team[1]
+        _, mass_std = self._robust_mass()
         scale = PUBLISHED_VARIANCE["relative"]
         out: dict = {
             "drive_gain": None if self.drive.std is None else self.drive.estimate,

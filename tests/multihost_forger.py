@@ -20,6 +20,7 @@ import sys
 import time
 
 from agent.protocol import (
+    WIRE_VERSION,
     Command,
     Control,
     Estimates,
@@ -39,7 +40,7 @@ def _noise(rng: random.Random) -> bytes:
     """Bytes that are no message: random, or a valid header with garbage after it."""
     body = rng.randbytes(rng.randint(0, 120))
     if rng.random() < 0.5:
-        return bytes([0x48, 6, rng.randint(0, 255)]) + body
+        return bytes([0x48, WIRE_VERSION, rng.randint(0, 255)]) + body
     return body
 
 

@@ -25,10 +25,12 @@ LINE = {1: (2,), 2: (1, 3), 3: (2, 4), 4: (3,)}
 def _run(graph, ticks: int, noise: float, seed: int, late: int = 0, mixing: bool = True):
     """Every robot sums the true turn plus its own white noise (robot ``i``'s of standard
     deviation ``i × noise``); each hears its neighbours' levels ``late`` instants late
-    (``mixing=False``: it hears nothing). Returns the true rotation and the team."""
+    (``mixing=False``: it hears nothing). Returns the true rotation, the team and each
+    robot's level."""
     rng = random.Random(seed)
     robots = {i: RotationConsensus(len(n), len(graph)) for i, n in graph.items()}
     history = {i: {-1: (0.0, 0.0)} for i in graph}
+    levels = dict.fromkeys(graph, 0.0)
     theta = 0.0
     for e in range(ticks):
         true_turn = 0.01 * math.sin(0.003 * e) + 0.004
@@ -42,21 +44,21 @@ def _run(graph, ticks: int, noise: float, seed: int, late: int = 0, mixing: bool
             ]
             own = i * noise
             level_at = lambda k, i=i: history[i].get(k, (None,))[0]  # noqa: E731
-            consensus.update(e, true_turn + rng.gauss(0.0, own), own**2, heard, level_at)
-            history[i][e] = (consensus.level, consensus.variance)
-    return theta, robots
+            step = consensus.update(e, true_turn + rng.gauss(0.0, own), own**2, heard, level_at)
+            levels[i] += step
+            history[i][e] = (levels[i], consensus.variance)
+    return theta, robots, levels
 
 
 @pytest.mark.parametrize("late", [0, 3, 10])
 def test_the_team_level_averages_the_robots_noise(late: int) -> None:
     alone, together, spread = [], [], []
     for seed in range(40):
-        theta, team = _run(LINE, 2000, 0.001, seed, late=late, mixing=False)
-        alone.append(team[2].level - theta)
-        theta, team = _run(LINE, 2000, 0.001, seed, late=late)
-        together.append(team[2].level - theta)
-        levels = [robot.level for robot in team.values()]
-        spread.append(max(levels) - min(levels))
+        theta, _, levels = _run(LINE, 2000, 0.001, seed, late=late, mixing=False)
+        alone.append(levels[2] - theta)
+        theta, team, levels = _run(LINE, 2000, 0.001, seed, late=late)
+        together.append(levels[2] - theta)
+        spread.append(max(levels.values()) - min(levels.values()))
     # Robot 2's level alone drifts as a random walk of 0.002 √2000 = 0.089 rad; the four
     # robots' mean, of √(1 + 4 + 9 + 16)/4 of 0.001 per instant, 0.68 of that. The levels
     # agree to within a few turns' noise (a few more when late).
@@ -69,9 +71,9 @@ def test_the_team_level_averages_the_robots_noise(late: int) -> None:
 
 
 def test_without_noise_the_level_is_the_rotation_on_every_robot() -> None:
-    theta, team = _run(LINE, 500, 0.0, 0, late=2)
-    for robot in team.values():
-        assert robot.level == pytest.approx(theta, abs=1e-12)
+    theta, _, levels = _run(LINE, 500, 0.0, 0, late=2)
+    for level in levels.values():
+        assert level == pytest.approx(theta, abs=1e-12)
 
 
 def test_each_message_is_used_once_and_a_forgotten_instant_not_at_all() -> None:
@@ -93,7 +95,6 @@ def test_a_late_level_weighs_less() -> None:
 
 def test_levels_are_compared_modulo_two_pi() -> None:
     consensus = RotationConsensus(1, 2)
-    consensus.level = math.pi - 0.01
     history = {4: math.pi - 0.01}
     # The neighbour's level, sent wrapped, is 0.02 rad ahead: just past -π.
     step = consensus.update(5, 0.0, None, [(2, 1, 4, wrapped(math.pi + 0.01), 0.0)], history.get)

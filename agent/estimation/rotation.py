@@ -90,14 +90,13 @@ def wrapped(angle: float) -> float:
 
 
 class RotationConsensus:
-    """One robot's level ``θ_i`` of the load's rotation, and the mean variance ``ν_i`` of the
-    robots' turns (see the module docstring)."""
+    """One robot's steps of the level ``θ_i`` of the load's rotation, and the mean variance
+    ``ν_i`` of the robots' turns (see the module docstring). The caller keeps the level and
+    its recent history: :meth:`update` reads it and returns the step."""
 
     def __init__(self, degree: int, n: int):
         self.degree = degree
         self.n = n
-        self.level = 0.0
-        """``θ_i`` (rad) at the last update's instant."""
         self.variance = 0.0
         """``ν_i`` (rad²): → the robots' mean ``Var(δ_i)``."""
         self._variance_input = 0.0
@@ -121,7 +120,7 @@ class RotationConsensus:
         """Instant ``instant``: ``turn`` is ``δ_i`` since the previous one and ``variance``
         its variance (``None``: as before); ``heard`` holds each neighbour's ``(j, degree,
         instant, level, ν_j)`` from its latest message; ``level_at(e)`` gives this robot's
-        own level at instant ``e`` (``None`` if forgotten). Returns the team's turn
+        own level at instant ``e`` (``None`` if forgotten). Returns the team's turn, the step
         ``θ_i(e) − θ_i(e−1)``."""
         correction = spread = 0.0
         used = self._used
@@ -141,6 +140,4 @@ class RotationConsensus:
             spread += variance - self._variance_input
             self._variance_input = variance
         self.variance += spread
-        step = turn + correction
-        self.level += step
-        return step
+        return turn + correction
