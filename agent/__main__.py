@@ -1,5 +1,5 @@
-"""``python -m agent``: the ``heft`` command (see :mod:`agent.dispatch`)."""
+"""``python -m agent``: the ``heft`` command (see :mod:`agent.platform.dispatch`)."""
 
-from agent.dispatch import main
+from agent.platform.dispatch import main
 
 raise SystemExit(main())

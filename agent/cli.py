@@ -9,7 +9,7 @@ import dataclasses
 import logging
 from pathlib import Path
 
-from agent.command_line import (
+from agent.platform.command_line import (
     HelpFormatter,
     UsageError,
     add_zenoh_options,
@@ -18,8 +18,8 @@ from agent.command_line import (
     write_text,
     zenoh_settings,
 )
-from agent.config import ConfigError
-from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings
+from agent.platform.config import ConfigError
+from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings
 
 
 def cmd_agent(args: argparse.Namespace) -> int:
@@ -37,8 +37,8 @@ def cmd_agent(args: argparse.Namespace) -> int:
 
 def cmd_router(args: argparse.Namespace) -> int:
     """``heft router``: run a Zenoh router until a signal."""
-    from agent.process import stop_on_signals
-    from agent.zenoh_session import open_session
+    from agent.platform.process import stop_on_signals
+    from agent.platform.zenoh_session import open_session
 
     base = ZenohSettings(mode="router", connect=(), listen=(DEFAULT_ROUTER,))
     settings = zenoh_settings(args, base)
@@ -67,7 +67,8 @@ def _count(text: str, option: str, low: int, high: int) -> int:
 
 def cmd_deploy_certs(args: argparse.Namespace) -> int:
     """``heft deploy certs``: the team's CA and certificates, or more signed by its CA."""
-    from agent.certificates import (
+    from agent.platform.config import MAX_ROBOTS
+    from agent.security.certificates import (
         CA_KEY,
         DEFAULT_HOSTS,
         MAX_DAYS,
@@ -76,7 +77,6 @@ def cmd_deploy_certs(args: argparse.Namespace) -> int:
         make_certificates,
         team_identities,
     )
-    from agent.config import MAX_ROBOTS
 
     if (args.robots is None) == (not args.identity):
         raise UsageError("give --robots N (a new team) or --identity NAME (add to its CA)")
@@ -109,8 +109,8 @@ def cmd_deploy_certs(args: argparse.Namespace) -> int:
 
 def cmd_deploy_router_config(args: argparse.Namespace) -> int:
     """``heft deploy router-config``: the secured router's Zenoh config for a team."""
-    from agent.access_control import AccessError, parse_edges, router_config_text
-    from agent.config import MAX_ROBOTS
+    from agent.platform.config import MAX_ROBOTS
+    from agent.security.access_control import AccessError, parse_edges, router_config_text
 
     robots = _count(args.robots, "--robots", 1, MAX_ROBOTS)
     try:
@@ -201,7 +201,8 @@ def _add_deploy(commands: argparse._SubParsersAction) -> None:
             "router host (ca.pem, router.pem, router-key.pem), no multicast scouting, no\n"
             "shared memory, and access control: everything denied but what each identity's\n"
             "processes do (robot-<i>: its robot's keys and its graph neighbours' shares;\n"
-            "plant; operator: may stop runs; dashboard: listens). See agent/access_control.py.\n"
+            "plant; operator: may stop runs; dashboard: listens).\n"
+            "See agent/security/access_control.py.\n"
             "Run the router with: heft router --zenoh-config FILE --listen ENDPOINT\n"
             "(or zenohd --config FILE).\n\n"
             "Exit status: 0 written, 2 bad arguments (one 'heft: error:' line)."

@@ -1,12 +1,12 @@
 """One robot's agent as a standalone process: ``heft agent --config robot.toml``.
 
-The process is the I/O around an :class:`~agent.agent.Agent`: through its robot port
-(:mod:`agent.robot_io`) it receives its robot's measurements (from the plant or the robot's
+The process is the I/O around an :class:`~agent.algorithm.agent.Agent`: through its robot port
+(:mod:`agent.platform.robot_io`) it receives its robot's measurements (from the plant or the robot's
 CAN bridge), the team's control messages and the liveliness of its neighbours, and sends force
 commands and, now and then, its estimates and status; through its transport
-(:mod:`agent.transport`, with :mod:`agent.faults` around it) it exchanges shares with its graph
-neighbours. On Zenoh the port declares a liveliness token, so the plant and the neighbours
-notice when the agent is gone.
+(:mod:`agent.platform.transport`, with :mod:`agent.platform.faults` around it) it exchanges shares
+with its graph neighbours. On Zenoh the port declares a liveliness token, so the plant and the
+neighbours notice when the agent is gone.
 
 Clocks:
 
@@ -24,11 +24,11 @@ Either way a measurement stamped more than :data:`TICK_WINDOW` ticks ahead is re
 adopted as the clock.
 
 A neighbour whose liveliness token disappears (killed, or hung past its lease) is lost: the
-agent halts the team (see :mod:`agent.phase_machine`) and answers with zero force. When every
-neighbour's token is back (the link is up again, or the robot's agent was restarted), the robot
-is ready to begin again, and once every robot is, the team starts over from Step 1 in a new
-generation (:mod:`agent.coordination`): a robot that was away missed its own measurements, a
-restarted one lost all it knew, and the load moved unobserved meanwhile, so nothing estimated
+agent halts the team (see :mod:`agent.algorithm.phase_machine`) and answers with zero force. When
+every neighbour's token is back (the link is up again, or the robot's agent was restarted), the
+robot is ready to begin again, and once every robot is, the team starts over from Step 1 in a new
+generation (:mod:`agent.algorithm.coordination`): a robot that was away missed its own measurements,
+a restarted one lost all it knew, and the load moved unobserved meanwhile, so nothing estimated
 before the halt is kept.
 """
 
@@ -42,26 +42,34 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.agent import Agent
-from agent.config import (
+from agent.algorithm.agent import Agent
+from agent.algorithm.tuning import AgentConfig, AgentTuning
+from agent.platform.config import (
     MAX_ROBOTS,
     MAX_SEED,
-    AgentConfig,
-    AgentTuning,
     ConfigError,
     bounded,
     check_bounds,
     from_table,
     read_toml,
 )
-from agent.faults import FaultSettings, FaultyTransport
-from agent.process import RejectLog, stop_on_signals
-from agent.protocol import CLOCKS, Command, Control, Keys, Measurement, Phase, Share, Status
-from agent.resend import ResendTimeout
-from agent.robot_io import Liveliness, RobotPort
-from agent.zenoh_robot_io import ZenohRobotPort
-from agent.zenoh_session import ZenohSettings, open_session
-from agent.zenoh_transport import ZenohTransport
+from agent.platform.faults import FaultSettings, FaultyTransport
+from agent.platform.process import RejectLog, stop_on_signals
+from agent.platform.protocol import (
+    CLOCKS,
+    Command,
+    Control,
+    Keys,
+    Measurement,
+    Phase,
+    Share,
+    Status,
+)
+from agent.platform.resend import ResendTimeout
+from agent.platform.robot_io import Liveliness, RobotPort
+from agent.platform.zenoh_robot_io import ZenohRobotPort
+from agent.platform.zenoh_session import ZenohSettings, open_session
+from agent.platform.zenoh_transport import ZenohTransport
 
 log = logging.getLogger("heft.agent")
 TICK_WINDOW = 500
@@ -79,13 +87,14 @@ class AgentNodeConfig:
     """A robot's ``robot.toml``: who it is, where its team's Zenoh network is, its limits.
 
     Every value has a range, checked by :meth:`validate` before the agent starts (the
-    tables' own: :class:`~agent.zenoh_session.ZenohSettings`, :class:`~agent.config.AgentTuning`).
+    tables' own: :class:`~agent.platform.zenoh_session.ZenohSettings`,
+    :class:`~agent.algorithm.tuning.AgentTuning`).
     """
 
     robot: int
     """This robot's id, in 1..n."""
     n: int
-    """Robots in the team: 2 to :data:`~agent.config.MAX_ROBOTS` (32)."""
+    """Robots in the team: 2 to :data:`~agent.platform.config.MAX_ROBOTS` (32)."""
     neighbours: tuple[int, ...]
     """Its graph neighbours: other robots of 1..n, at least one, each once."""
     team: str = "heft"

@@ -9,9 +9,10 @@ the Zenoh session:
   checksum, out of range, error frame, ...). Frames of other nodes (a shared bus) are counted
   and ignored. The driver's ``Odometry`` (``ṗ_Ci``) and ``AppliedForce`` (``f_i``) of one tick —
   the tick their counter ties them to (:mod:`bridge.timing`) — become the agent's
-  :class:`~agent.protocol.Measurement` with ``time_s = k T``, once both have arrived. A tick
-  that never gets both is a missing measurement: counted, never invented.
-- :meth:`Bridge.command` takes the agent's :class:`~agent.protocol.Command` (already checked
+  :class:`~agent.platform.protocol.Measurement` with ``time_s = k T``, once both have arrived. A
+  tick that never gets both is a missing measurement: counted, never invented.
+- :meth:`Bridge.command` takes the agent's :class:`~agent.platform.protocol.Command` (already
+checked
   against the protocol's domains) and gives its ``ForceCommand`` frame: the force clamped to
   the DBC's ±500 N per axis (clamps counted), ``Counter = k mod 16``. A command for a tick the
   bus has not opened, or more than 15 ticks old (its counter would name another tick), is
@@ -38,8 +39,8 @@ from dataclasses import dataclass
 
 import can
 
-from agent.process import RejectLog
-from agent.protocol import BridgeStatus, Command, Measurement
+from agent.platform.process import RejectLog
+from agent.platform.protocol import BridgeStatus, Command, Measurement
 from bridge.codec import (
     COUNTER_MODULO,
     REASONS,

@@ -11,7 +11,7 @@ import argparse
 import dataclasses
 import sys
 
-from agent.command_line import (
+from agent.platform.command_line import (
     PROG,
     HelpFormatter,
     UsageError,
@@ -19,8 +19,8 @@ from agent.command_line import (
     setup_logging,
     zenoh_settings,
 )
-from agent.config import ConfigError
-from bridge.vcan import DEFAULT_COUNT, DEFAULT_MEMORY
+from agent.platform.config import ConfigError
+from bridge.devtools.vcan import DEFAULT_COUNT, DEFAULT_MEMORY
 
 
 def register(commands: argparse._SubParsersAction) -> None:
@@ -32,7 +32,7 @@ def register(commands: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------------- bridge
 def cmd_bridge(args: argparse.Namespace) -> int:
     """``heft bridge``: run one robot's AGV bridge until a signal."""
-    from agent.dispatch import NETWORK_UNAVAILABLE
+    from agent.platform.dispatch import NETWORK_UNAVAILABLE
     from bridge.config import load_bridge_config
     from bridge.node import BusUnavailable, run_bridge
 
@@ -109,8 +109,8 @@ def _add_bridge(commands: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------------- vcan
 def cmd_vcan(args: argparse.Namespace) -> int:
     """``heft vcan``: run the command where vcan0 ... vcan{N-1} exist; its exit status."""
-    from bridge import vcan
-    from bridge.vcan_run import check, run
+    from bridge.devtools import vcan
+    from bridge.devtools.vcan_run import check, run
 
     if args.check:
         if args.command:

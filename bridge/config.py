@@ -24,9 +24,9 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent.config import ConfigError, bounded, check_bounds, from_table, read_toml
 from agent.node import AgentNodeConfig
-from agent.zenoh_session import ZenohSettings
+from agent.platform.config import ConfigError, bounded, check_bounds, from_table, read_toml
+from agent.platform.zenoh_session import ZenohSettings
 from bridge.dbc import MAX_NODE
 
 TIME_SOURCES = ("sync", "clock")

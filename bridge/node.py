@@ -8,10 +8,10 @@ The I/O around a :class:`~bridge.bridge.Bridge`:
   disappeared, bus-off) the bridge logs it, closes the bus and reopens it every
   :data:`REOPEN_S` until it is back, counting each reopening;
 - the robot's side of the robot-I/O seam over Zenoh
-  (:class:`~agent.zenoh_robot_io.ZenohAgentsPort` for this one robot): its agent's commands in,
-  its measurements out, exactly as the plant's, so an agent cannot tell a bridged robot from a
+  (:class:`~agent.platform.zenoh_robot_io.ZenohAgentsPort` for this one robot): its agent's commands
+  in, its measurements out, exactly as the plant's, so an agent cannot tell a bridged robot from a
   simulated one. The bridge declares its own liveliness token (``Keys.bridge_alive``) once the
-  bus is open, and publishes its :class:`~agent.protocol.BridgeStatus` every
+  bus is open, and publishes its :class:`~agent.platform.protocol.BridgeStatus` every
   :data:`STATUS_EVERY_S` and whenever its watchdog trips or clears.
 
 It runs until SIGINT, SIGTERM or SIGHUP, and then commands zero force before it leaves. The
@@ -31,11 +31,11 @@ from typing import NamedTuple
 
 import can
 
-from agent.process import RejectLog, stop_on_signals_taken
-from agent.protocol import Command, Control, Keys
-from agent.robot_io import Event, Liveliness
-from agent.zenoh_robot_io import ZenohAgentsPort
-from agent.zenoh_session import open_session
+from agent.platform.process import RejectLog, stop_on_signals_taken
+from agent.platform.protocol import Command, Control, Keys
+from agent.platform.robot_io import Event, Liveliness
+from agent.platform.zenoh_robot_io import ZenohAgentsPort
+from agent.platform.zenoh_session import open_session
 from bridge.bridge import Bridge
 from bridge.codec import COUNTER_MODULO, AgvCodec, ForceCommand
 from bridge.config import BridgeConfig, CanSettings

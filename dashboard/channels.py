@@ -1,8 +1,9 @@
 """A team's Zenoh keys as typed channels, and protocol messages as JSON records.
 
-Every key and payload is :mod:`agent.protocol`'s: :func:`kind_of` tells which message class a
-key carries by asking :class:`~agent.protocol.Keys` for the keys it knows, and a payload becomes
-a message only through :func:`agent.protocol.decode` (which checks every field's domain).
+Every key and payload is :mod:`agent.platform.protocol`'s: :func:`kind_of` tells which message class
+a key carries by asking :class:`~agent.platform.protocol.Keys` for the keys it knows, and a payload
+becomes a message only through :func:`agent.platform.protocol.decode` (which checks every field's
+domain).
 
 Recordings (:mod:`dashboard.recorder`) store each message as a JSON object with every field of
 its dataclass, as the protocol's JSON messages are on the wire (pairs as arrays, phases by name,
@@ -21,9 +22,9 @@ import types
 import typing
 from collections.abc import Callable
 
-from agent import protocol
-from agent.config import ConfigError, from_table
-from agent.protocol import (
+from agent.platform import protocol
+from agent.platform.config import ConfigError, from_table
+from agent.platform.protocol import (
     BridgeStatus,
     Clock,
     Command,
@@ -136,8 +137,8 @@ def _no_constants(name: str):
 def from_record(kind: type, data: bytes):
     """The message of class ``kind`` recorded as ``data`` (:func:`record_bytes`), checked as
     the protocol checks what arrives over the network (every field present and typed, numbers
-    finite, each field's domain: :data:`agent.protocol.DOMAINS`); :class:`DecodeError` if it
-    is not one."""
+    finite, each field's domain: :data:`agent.platform.protocol.DOMAINS`); :class:`DecodeError`
+    if it is not one."""
     name = kind.__name__
     try:
         table = json.loads(data, parse_constant=_no_constants)

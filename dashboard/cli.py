@@ -18,7 +18,7 @@ import math
 import os
 from pathlib import Path
 
-from agent.command_line import (
+from agent.platform.command_line import (
     HelpFormatter,
     UsageError,
     add_zenoh_options,
@@ -26,7 +26,7 @@ from agent.command_line import (
     setup_logging,
     zenoh_settings,
 )
-from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings
+from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings
 from dashboard.display import DEFAULT_PORT
 
 TOKEN_ENV = "HEFT_DASHBOARD_TOKEN"
@@ -35,7 +35,7 @@ LOG = logging.getLogger("heft.dashboard")
 
 
 def _keys(team: str | None, option: str = "--team"):
-    from agent.protocol import Keys
+    from agent.platform.protocol import Keys
 
     if team is None:
         return None
@@ -74,7 +74,7 @@ def _speed(value: str) -> float:
 # ------------------------------------------------------------------------------ heft dashboard
 def cmd_dashboard(args: argparse.Namespace) -> int:
     """``heft dashboard``: serve the page for a live team or a recording until a signal."""
-    from agent.process import stop_on_signals
+    from agent.platform.process import stop_on_signals
     from dashboard.display import Display
     from dashboard.server import ServeError, is_loopback
 
@@ -135,7 +135,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
 
 def _network_error(message: str) -> Exception:
     """A busy port: exit status 4, as an unreachable router is."""
-    from agent.zenoh_session import SessionError
+    from agent.platform.zenoh_session import SessionError
 
     return SessionError(message)
 
@@ -143,7 +143,7 @@ def _network_error(message: str) -> Exception:
 # ------------------------------------------------------------------------------ heft record
 def cmd_record(args: argparse.Namespace) -> int:
     """``heft record``: write a team's traffic to MCAP until a signal or ``--duration``."""
-    from agent.process import stop_on_signals
+    from agent.platform.process import stop_on_signals
     from dashboard.display import TeamRecording
 
     keys = _keys(args.team)

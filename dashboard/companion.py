@@ -17,7 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TextIO
 
-from agent.zenoh_session import ZenohSettings
+from agent.platform.zenoh_session import ZenohSettings
 from dashboard.display import DEFAULT_PORT, Display, TeamRecording
 from dashboard.geometry import LoadGeometry
 
@@ -62,7 +62,7 @@ class RunCompanion:
 
     def on_ready(self, router: str, team: str) -> None:
         """The run's router is up at ``router``, its team is ``team``: subscribe (call before
-        the plant and the agents start). :class:`~agent.zenoh_session.SessionError` if the
+        the plant and the agents start). :class:`~agent.platform.zenoh_session.SessionError` if the
         router cannot be reached."""
         settings = ZenohSettings(mode="client", connect=(router,))
         if self.record is not None:  # one subscription for both: each message decoded once

@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from agent.zenoh_session import ZenohSettings
+from agent.platform.zenoh_session import ZenohSettings
 
 LOG = logging.getLogger("heft.dashboard")
 DEFAULT_PORT = 8765
@@ -53,7 +53,7 @@ class Display:
 
     def watch(self, settings: ZenohSettings, team: str | None = None) -> None:
         """Follow team ``team`` (the hub's, by default) live through Zenoh."""
-        from agent.protocol import Keys
+        from agent.platform.protocol import Keys
         from dashboard.feed import LiveFeed
 
         keys = Keys(team or self.hub.team)
@@ -88,11 +88,11 @@ class TeamRecording:
         settings: ZenohSettings,
         display: Display | None = None,
     ) -> TeamRecording:
-        """Start recording; :class:`~agent.zenoh_session.SessionError` if Zenoh cannot (the
+        """Start recording; :class:`~agent.platform.zenoh_session.SessionError` if Zenoh cannot (the
         file is created only once the session is open). With ``display``, the same decoded
         messages feed its page too (one subscription, each message decoded once)."""
-        from agent.protocol import Keys
-        from agent.zenoh_session import open_session
+        from agent.platform.protocol import Keys
+        from agent.platform.zenoh_session import open_session
         from dashboard.feed import LiveFeed, everything
         from dashboard.recorder import Recorder
 

@@ -18,10 +18,10 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 
-from agent.config import MAX_ROBOTS
-from agent.process import RejectLog
-from agent.protocol import DecodeError, Keys
-from agent.zenoh_session import (
+from agent.platform.config import MAX_ROBOTS
+from agent.platform.process import RejectLog
+from agent.platform.protocol import DecodeError, Keys
+from agent.platform.zenoh_session import (
     ZenohSettings,
     fifo_subscriber,
     open_session,
@@ -92,7 +92,8 @@ class LiveFeed:
         self._thread = threading.Thread(target=self._run, name="dashboard-feed", daemon=True)
 
     def start(self) -> LiveFeed:
-        """Open the session (:class:`~agent.zenoh_session.SessionError` if Zenoh cannot) and
+        """Open the session (:class:`~agent.platform.zenoh_session.SessionError` if Zenoh cannot)
+        and
         subscribe; the worker starts at once."""
         if self._session is None:
             self._session = open_session(self.settings)

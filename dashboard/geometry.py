@@ -12,8 +12,8 @@ import json
 import math
 from dataclasses import dataclass
 
-from agent.config import MAX_ROBOTS
-from agent.estimation.geometry import Vec2
+from agent.platform.config import MAX_ROBOTS
+from agent.platform.geometry import Vec2
 
 METADATA_NAME = "heft.load"
 """The MCAP metadata record holding a recording's :class:`LoadGeometry`."""

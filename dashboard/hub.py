@@ -11,7 +11,7 @@ import threading
 import time
 from pathlib import Path
 
-from agent.protocol import (
+from agent.platform.protocol import (
     BridgeStatus,
     Command,
     Control,

@@ -19,7 +19,7 @@ from pathlib import Path
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from agent.protocol import DecodeError, Keys
+from agent.platform.protocol import DecodeError, Keys
 from dashboard.channels import from_record, kind_of
 from dashboard.geometry import METADATA_NAME, GeometryError, LoadGeometry
 from dashboard.recorder import TEAM_METADATA

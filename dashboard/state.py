@@ -24,8 +24,8 @@ import math
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
-from agent.config import MAX_ROBOTS
-from agent.protocol import (
+from agent.platform.config import MAX_ROBOTS
+from agent.platform.protocol import (
     BridgeStatus,
     Clock,
     Command,

@@ -360,14 +360,14 @@ class RecordedRun:
     period_s: float
     first_tick: int
     truth: object | None
-    """The recorded :class:`~agent.protocol.Truth` at the stretch's last tick, if any."""
+    """The recorded :class:`~agent.platform.protocol.Truth` at the stretch's last tick, if any."""
 
 
 def read_recording(path) -> RecordedRun:
     """The longest stretch of consecutive ticks at which every robot's measurement was
     recorded in the MCAP file ``path`` (at most :data:`MAX_TICKS`). Raises
     :class:`ValueError` (one line) when the file holds no such stretch."""
-    from agent.protocol import Measurement, Truth
+    from agent.platform.protocol import Measurement, Truth
     from dashboard.replay import Recording
 
     recording = Recording(path)

@@ -3,7 +3,7 @@
 In a CAN run (``heft sim SCENARIO --can``) the plant plays every AGV's driver. Each robot is
 on a CAN bus (by default its own: robot ``i`` on ``vcan{i}``), where its AGV bridge
 (``heft bridge``) meets it; the bridge turns the frames into the agent's Zenoh messages and
-back. :class:`CanDriversPort` is the :class:`~agent.robot_io.AgentsPort` of those drivers:
+back. :class:`CanDriversPort` is the :class:`~agent.platform.robot_io.AgentsPort` of those drivers:
 
 - :meth:`~CanDriversPort.send` of tick ``k``'s measurement puts ``Sync(k)`` on the robot's bus
   (once per tick per bus: it opens the tick; again with a re-sent tick), then the robot's
@@ -11,19 +11,19 @@ back. :class:`CanDriversPort` is the :class:`~agent.robot_io.AgentsPort` of thos
   ``Counter = k % 16``. Values outside the DBC's
   ranges are clamped to them, and counted;
 - every driver sends a ``Heartbeat`` every 100 ms (mode READY, then ACTIVE once the ticks run);
-- a ``ForceCommand`` frame becomes a :class:`~agent.protocol.Command` for the newest tick
+- a ``ForceCommand`` frame becomes a :class:`~agent.platform.protocol.Command` for the newest tick
   ``≤`` the last tick opened on that bus whose ``% 16`` is the frame's counter. A ZERO-mode
   frame is the bridge's watchdog (its agent fell silent): on the wall clock it is a zero
   command for the bus's latest tick; in lockstep it never counts as a tick's command (the
   run stays deterministic: the plant waits for the agent's own), it is only counted;
 - a frame that does not decode, or is not one the drivers take, is counted in the port's
-  :class:`~agent.process.RejectLog`; the drivers' own frames coming back (buses that echo
+  :class:`~agent.platform.process.RejectLog`; the drivers' own frames coming back (buses that echo
   them) are ignored.
 
 Everything that is not the robots' hardware — the agents' and bridges' liveliness, the
-launcher's :class:`~agent.protocol.Control`, the plant's reports — goes through another port
-(``rest``: :class:`~agent.zenoh_robot_io.ZenohAgentsPort` with ``bridges=True`` in a process),
-whose event queue this port shares. A robot is up once both its agent and its bridge are,
+launcher's :class:`~agent.platform.protocol.Control`, the plant's reports — goes through another
+port (``rest``: :class:`~agent.platform.zenoh_robot_io.ZenohAgentsPort` with ``bridges=True`` in a
+process), whose event queue this port shares. A robot is up once both its agent and its bridge are,
 and lost as soon as either is gone.
 
 A reader thread per bus queues what arrives with its arrival time; frames are decoded on the
@@ -44,10 +44,10 @@ from typing import NamedTuple
 
 import can
 
-from agent.config import ConfigError
-from agent.estimation.geometry import Vec2
-from agent.protocol import Command, Measurement
-from agent.robot_io import AgentsPort, Event, Liveliness, RobotReport
+from agent.platform.config import ConfigError
+from agent.platform.geometry import Vec2
+from agent.platform.protocol import Command, Measurement
+from agent.platform.robot_io import AgentsPort, Event, Liveliness, RobotReport
 from bridge.codec import (
     COUNTER_MODULO,
     AgvCodec,

@@ -31,7 +31,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from agent.command_line import (
+from agent.platform.command_line import (
     PROG,
     HelpFormatter,
     UsageError,
@@ -41,13 +41,13 @@ from agent.command_line import (
     write_text,
     zenoh_settings,
 )
-from agent.protocol import CLOCKS, Phase
-from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings
+from agent.platform.protocol import CLOCKS, Phase
+from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings
 from simulator.scenario import Scenario, ScenarioError, load_scenario, scenario_to_toml
 
 if TYPE_CHECKING:
-    from agent.agent import Agent
-    from agent.faults import FaultSettings
+    from agent.algorithm.agent import Agent
+    from agent.platform.faults import FaultSettings
     from simulator.can_drivers import CanLink
     from simulator.inprocess import Progress, RunOutcome
 
@@ -170,7 +170,7 @@ def _companion(args: argparse.Namespace, scenario: Scenario):
         raise UsageError("--record needs --transport zenoh (a run in one process sends nothing)")
     if record is None and not dashboard:
         return None
-    from agent.zenoh_session import SessionError
+    from agent.platform.zenoh_session import SessionError
     from dashboard.companion import RunCompanion
     from dashboard.server import ServeError
 
@@ -253,8 +253,8 @@ def _run(
     every = max(1, round(PROGRESS_EVERY_S / scenario.period_s))
     transport = None
     if faults.active:
-        from agent.faults import FaultyTransport
-        from agent.transport import InMemoryTransport
+        from agent.platform.faults import FaultyTransport
+        from agent.platform.transport import InMemoryTransport
 
         transport = FaultyTransport(InMemoryTransport(scenario.n, scenario.edges), faults)
     try:
@@ -314,7 +314,7 @@ class _StopSignals:
 
 
 def _faults(args: argparse.Namespace, scenario: Scenario) -> FaultSettings:
-    from agent.faults import FaultSettings
+    from agent.platform.faults import FaultSettings
 
     if not 0.0 <= args.drop < 1.0:
         raise UsageError(f"--drop: expected a probability in [0, 1), got {args.drop:g}")
@@ -368,8 +368,8 @@ def _run_zenoh(
 def _watch(args: argparse.Namespace, scenario: Scenario, stop: threading.Event) -> RunOutcome:
     """``heft watch``'s run: a team that runs elsewhere, followed
     (:func:`simulator.watch.watch_team`)."""
-    from agent.config import Bound
-    from agent.protocol import Keys
+    from agent.platform.config import Bound
+    from agent.platform.protocol import Keys
     from simulator.launcher import RunFailed
     from simulator.watch import watch_team
 
@@ -419,7 +419,7 @@ def _write_plots(outcome: RunOutcome, directory: Path) -> list[Path]:
 # ------------------------------------------------------------------------------ heft demo
 def cmd_demo(args: argparse.Namespace) -> int:
     """``heft demo``: ``heft run`` of the paper's scenario over Zenoh on the wall clock."""
-    from simulator.benchmark import PAPER_SCENARIO
+    from simulator.bench.accuracy import PAPER_SCENARIO
 
     args.scenario = str(PAPER_SCENARIO)
     args.transport = "zenoh"
@@ -435,7 +435,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------------------ heft scenario
 def cmd_generate(args: argparse.Namespace) -> int:
     """``heft scenario generate``: write the random scenario of a seed as TOML."""
-    from agent.config import MAX_SEED, Bound
+    from agent.platform.config import MAX_SEED, Bound
     from simulator.generate import generate_scenario
 
     Bound(0, MAX_SEED).check("SEED", args.seed)
@@ -451,13 +451,18 @@ def cmd_generate(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------------------ heft bench
 def cmd_bench(args: argparse.Namespace) -> int:
     """``heft bench``: run a scenario several times and report accuracy and speed."""
-    from agent.config import Bound
-    from simulator.benchmark import DEFAULT_REPEAT, PAPER_SCENARIO, format_report, run_benchmark
+    from agent.platform.config import Bound
+    from simulator.bench.accuracy import (
+        DEFAULT_REPEAT,
+        PAPER_SCENARIO,
+        format_report,
+        run_benchmark,
+    )
 
     if args.dashboard:
         if args.can:
             raise UsageError("--dashboard and --can are two benchmarks: run one at a time")
-        from dashboard.benchmark import main as bench_dashboard
+        from dashboard.bench.streaming import main as bench_dashboard
 
         return bench_dashboard([])  # 16 robots at 100 Hz, 3 browsers, then a 10x replay
     if args.can:
@@ -505,7 +510,7 @@ def _say_run(label: str, outcome: RunOutcome) -> None:
 
 
 def _bench_zenoh(sizes: str) -> int:
-    from simulator.benchmark import format_zenoh_report, run_zenoh_benchmark
+    from simulator.bench.accuracy import format_zenoh_report, run_zenoh_benchmark
 
     try:
         counts = [int(s) for s in sizes.split(",")]
@@ -521,8 +526,8 @@ def _bench_zenoh(sizes: str) -> int:
 
 def _bench_can(args: argparse.Namespace) -> int:
     """``heft bench --can``: the AGV bridge's round trip, forwarding rate and CPU on vcan."""
-    from agent.config import Bound, ConfigError
-    from bridge.benchmark import (
+    from agent.platform.config import Bound, ConfigError
+    from bridge.bench.can import (
         DEFAULT_CHANNEL,
         BenchError,
         CanBenchSettings,
@@ -572,10 +577,9 @@ def _bench_can(args: argparse.Namespace) -> int:
 def _bench_noise(args: argparse.Namespace) -> int:
     """``heft bench --noise``: the robust estimators, the paper's and the centralized fit on
     the same noisy runs (``--sweep``: over σ_v, with a plot)."""
-    from agent.config import Bound
-    from simulator.benchmark import PAPER_SCENARIO
-    from simulator.generate import generate_scenario
-    from simulator.noise_bench import (
+    from agent.platform.config import Bound
+    from simulator.bench.accuracy import PAPER_SCENARIO
+    from simulator.bench.noise import (
         GENERATED_INERTIA_BRAKE_S,
         GENERATED_PUSH_DAMPING,
         NoiseSettings,
@@ -586,6 +590,7 @@ def _bench_noise(args: argparse.Namespace) -> int:
         run_sweep,
         timed,
     )
+    from simulator.generate import generate_scenario
 
     if args.generated is not None:
         Bound(1, 1000, "scenarios").check("--generated", args.generated)
@@ -655,7 +660,7 @@ def _bench_noise(args: argparse.Namespace) -> int:
 
 def _bench_changes(scenario, settings) -> int:
     """``heft bench --noise --changes``: a changed mass, a moved COM and no change, per seed."""
-    from simulator.change_bench import format_change_report, run_change_bench
+    from simulator.bench.changes import format_change_report, run_change_bench
 
     def on_result(result) -> None:
         noticed = "-" if result.latency_s is None else f"{result.latency_s:.2f} s"
@@ -673,7 +678,7 @@ def _bench_changes(scenario, settings) -> int:
 
 
 def _bench_generated(count: int) -> int:
-    from simulator.benchmark import format_generated, run_generated
+    from simulator.bench.accuracy import format_generated, run_generated
 
     if count < 1:
         raise UsageError(f"--generated must be at least 1, got {count}")
@@ -691,10 +696,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     """``heft sim``: the plant of a scenario as a process on Zenoh."""
     import dataclasses
 
-    from agent.config import Bound, bounds
-    from agent.dispatch import NETWORK_UNAVAILABLE
-    from agent.process import stop_on_signals
-    from agent.protocol import Keys
+    from agent.platform.config import Bound, bounds
+    from agent.platform.dispatch import NETWORK_UNAVAILABLE
+    from agent.platform.process import stop_on_signals
+    from agent.platform.protocol import Keys
     from simulator.can_drivers import CanBusError
     from simulator.node import run_plant
 
@@ -736,7 +741,7 @@ def _can_link(args: argparse.Namespace) -> CanLink | None:
             if getattr(args, option) is not None:
                 raise UsageError(f"--{option.replace('_', '-')} needs --can")
         return None
-    from agent.config import ConfigError
+    from agent.platform.config import ConfigError
     from simulator.can_drivers import CanLink
 
     given = {"interface": args.can_interface, "channel": args.can_channel}

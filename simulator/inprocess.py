@@ -23,10 +23,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from agent.agent import Agent
-from agent.config import AgentConfig
-from agent.protocol import Estimates, Measurement, Phase, Truth
-from agent.transport import InMemoryTransport, Transport
+from agent.algorithm.agent import Agent
+from agent.algorithm.tuning import AgentConfig
+from agent.platform.protocol import Estimates, Measurement, Phase, Truth
+from agent.platform.transport import InMemoryTransport, Transport
 from simulator.history import History
 from simulator.plant import Plant
 from simulator.scenario import Scenario

@@ -26,7 +26,7 @@ Supervision. The launcher watches every process it started, not only what the te
 Each verdict is a short machine-readable ``reason`` and a sentence for people (``detail``).
 Then it stops the plant, tells the agents to stop, and — whatever happened, success, failure,
 a signal — stops every child it started (SIGTERM to all, then SIGKILL to what is left) and
-closes its own session. Every child (:class:`~agent.children.Child`) also asks the kernel
+closes its own session. Every child (:class:`~agent.platform.children.Child`) also asks the kernel
 (Linux ``PR_SET_PDEATHSIG``) for a signal when the launcher dies, so even a ``kill -9`` of the
 launcher leaves no orphan.
 """
@@ -48,12 +48,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from agent.children import Child, describe_exit, free_port, stop_all, wait_all
-from agent.config import to_toml
-from agent.faults import FaultSettings
 from agent.node import AgentNodeConfig
-from agent.process import RejectLog
-from agent.protocol import (
+from agent.platform.children import Child, describe_exit, free_port, stop_all, wait_all
+from agent.platform.config import to_toml
+from agent.platform.faults import FaultSettings
+from agent.platform.process import RejectLog
+from agent.platform.protocol import (
     BridgeStatus,
     Control,
     DecodeError,
@@ -66,7 +66,7 @@ from agent.protocol import (
     decode,
     encode,
 )
-from agent.zenoh_session import (
+from agent.platform.zenoh_session import (
     SessionError,
     ZenohSettings,
     fifo_subscriber,
@@ -224,7 +224,7 @@ class Collector:
         come back: a restarted agent, a link up again); by default only the moment it takes
         to hear who was lost."""
         self.generation = 0
-        """The team's newest generation heard (:mod:`agent.coordination`)."""
+        """The team's newest generation heard (:mod:`agent.algorithm.coordination`)."""
         self.rejoins: list[dict[str, int | None]] = []
         """Each new beginning: the tick the team halted at (``None``: its halt was not heard,
         e.g. the router was down) and the tick it began again."""

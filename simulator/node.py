@@ -1,6 +1,6 @@
 """The plant as a process: ``heft sim SCENARIO``.
 
-It stands where the real AGVs will, behind a robots' port (:mod:`agent.robot_io`): it sends
+It stands where the real AGVs will, behind a robots' port (:mod:`agent.platform.robot_io`): it sends
 each robot's measurement to its agent, applies each robot's latest command, and reports its
 clock, ground truth (for evaluation and display only: no agent subscribes to it) and
 counters.
@@ -8,7 +8,7 @@ counters.
 - ``lockstep``: tick ``k`` is published, and the plant steps only once every live agent's
   command for tick ``k`` has arrived: deterministic, as fast as the agents allow. A robot that
   has not answered within a timeout that follows the time a tick takes
-  (:class:`~agent.resend.ResendTimeout`) is sent the tick again.
+  (:class:`~agent.platform.resend.ResendTimeout`) is sent the tick again.
 - ``realtime``: the plant steps on the wall clock at the sensor rate, applying the newest
   command each robot has sent; late and missing commands are held (the previous one stays)
   and counted, and the latency from publishing a tick to receiving each command is measured.
@@ -21,9 +21,9 @@ restarted, or its link up again): then the plant applies its commands again, as 
 would.
 
 The port is the robots' hardware as the plant stands in for it: Zenoh
-(:class:`~agent.zenoh_robot_io.ZenohAgentsPort`) when the agents talk to the plant directly,
-or the AGVs' CAN buses (:class:`~simulator.can_drivers.CanDriversPort`, ``heft sim --can``)
-when each robot's AGV bridge stands between them; then a robot is up once its agent and its
+(:class:`~agent.platform.zenoh_robot_io.ZenohAgentsPort`) when the agents talk to the plant
+directly, or the AGVs' CAN buses (:class:`~simulator.can_drivers.CanDriversPort`, ``heft sim
+--can``) when each robot's AGV bridge stands between them; then a robot is up once its agent and its
 bridge are, and lost when either is gone.
 """
 
@@ -36,12 +36,12 @@ import time
 from collections import deque
 from typing import TYPE_CHECKING
 
-from agent.process import RejectLog
-from agent.protocol import Clock, Command, Control, Keys, Measurement, PlantStatus
-from agent.resend import ResendTimeout
-from agent.robot_io import AgentsPort, Liveliness
-from agent.zenoh_robot_io import ZenohAgentsPort
-from agent.zenoh_session import ZenohSettings, open_session
+from agent.platform.process import RejectLog
+from agent.platform.protocol import Clock, Command, Control, Keys, Measurement, PlantStatus
+from agent.platform.resend import ResendTimeout
+from agent.platform.robot_io import AgentsPort, Liveliness
+from agent.platform.zenoh_robot_io import ZenohAgentsPort
+from agent.platform.zenoh_session import ZenohSettings, open_session
 from simulator.plant import Plant
 from simulator.scenario import Scenario
 

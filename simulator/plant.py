@@ -1,8 +1,8 @@
 """The plant: a pymunk rigid body standing in for the real load and the robots' drivers.
 
 The agents never see this module's state directly. Each sensor tick they get one
-:class:`~agent.protocol.Measurement` per robot from :meth:`Plant.measure` (the velocity of the
-robot's contact point and the force it applied, both with optional Gaussian noise), and they
+:class:`~agent.platform.protocol.Measurement` per robot from :meth:`Plant.measure` (the velocity of
+the robot's contact point and the force it applied, both with optional Gaussian noise), and they
 answer with :meth:`Plant.command` (the force to apply until the next tick).
 :meth:`Plant.advance` then integrates one sensor period. :meth:`Plant.truth` exposes the ground
 truth for evaluation only.
@@ -48,8 +48,8 @@ import numpy as np
 import pymunk
 from pymunk import Vec2d
 
-from agent.estimation.geometry import Vec2
-from agent.protocol import Measurement, Truth
+from agent.platform.geometry import Vec2
+from agent.platform.protocol import Measurement, Truth
 
 if TYPE_CHECKING:
     from simulator.scenario import Scenario

@@ -33,7 +33,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 if TYPE_CHECKING:
-    from agent.protocol import Estimates
+    from agent.platform.protocol import Estimates
     from simulator.inprocess import RunOutcome, Sample
 
 PHASE_COLOURS = {"excite": "#fff3d6", "inertia": "#e3f0ff", "push": "#e6f6e6", "done": "#f0f0f0"}

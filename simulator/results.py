@@ -1,18 +1,18 @@
 """A run's results: the JSON document, the worst errors against truth, and a text table.
 
 Everything here is computed from the final :class:`~simulator.inprocess.Sample` of a run (every
-robot's :class:`~agent.protocol.Estimates` and the plant's truth of the same instant) and from
-the scenario (robot ids and graph). Units are SI; vectors are ``[x, y]`` in the world frame
+robot's :class:`~agent.platform.protocol.Estimates` and the plant's truth of the same instant) and
+from the scenario (robot ids and graph). Units are SI; vectors are ``[x, y]`` in the world frame
 ``W`` at the final estimation instant.
 
-Conventions (those of :mod:`agent.protocol`):
+Conventions (those of :mod:`agent.platform.protocol`):
 
 - ``contact_to_com`` of robot ``i`` is ``p_C − p_Ci``;
 - ``relative_positions[j]`` of robot ``i`` is ``z_ij = p_Ci − p_Cj`` (``j`` a graph neighbour);
 - ``centroid_offset`` is ``z_i = p_Ci − p_G`` (``p_G`` the centroid of the contacts);
 - ``com_offset`` is ``z_C = p_G − p_C``; ``com_observer`` is observer (24)'s ``ẑ_C``.
 
-Paper steps (``phases`` of the JSON), from each robot's :class:`~agent.protocol.Estimates`
+Paper steps (``phases`` of the JSON), from each robot's :class:`~agent.platform.protocol.Estimates`
 (``started[step]`` and ``settled[step]``, ticks):
 
 - ``start_s`` = when the first robot began the step, ``min_i started_i[step] × period``;
@@ -35,11 +35,11 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from agent.estimation.estimator import largest_std
-from agent.estimation.geometry import Vec2
+from agent.algorithm.estimation.estimator import largest_std
+from agent.platform.geometry import Vec2
 
 if TYPE_CHECKING:
-    from agent.protocol import Estimates, Truth
+    from agent.platform.protocol import Estimates, Truth
     from simulator.inprocess import RunOutcome
     from simulator.scenario import Scenario
 
@@ -303,8 +303,8 @@ def floor_check(outcome: RunOutcome) -> dict[str, Any]:
 
 
 def load_changes(outcome: RunOutcome) -> dict[str, Any]:
-    """The scenario's load changes and the team's restarts (:mod:`agent.coordination`): each
-    change with the first restart after it (``restarted_s``, ``None`` if the team never
+    """The scenario's load changes and the team's restarts (:mod:`agent.algorithm.coordination`):
+    each change with the first restart after it (``restarted_s``, ``None`` if the team never
     restarted for it) and the delay (``latency_s``); every restart (``restarts_s``, from the
     recorded estimates: the tick each epoch began); and the restarts that followed no change
     (``false_alarms``)."""

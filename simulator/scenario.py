@@ -24,9 +24,9 @@ A scenario is a TOML file (``simulator/scenarios/paper.toml`` is the paper's Sec
 :func:`load_scenario` reads a file and :func:`parse_scenario` a table already decoded; both
 return a validated, frozen :class:`Scenario` or raise :class:`ScenarioError`, whose one-line
 message names the offending key. Every value has a range, declared next to its field
-(:func:`agent.config.bounded`) or as a constant below, and listed in the README ("Limits").
+(:func:`agent.platform.config.bounded`) or as a constant below, and listed in the README ("Limits").
 :func:`scenario_to_toml` writes a scenario back.
-Tables are turned into dataclasses by :func:`agent.config.from_table`.
+Tables are turned into dataclasses by :func:`agent.platform.config.from_table`.
 """
 
 from __future__ import annotations
@@ -41,10 +41,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agent.config import (
+from agent.algorithm.tuning import AgentTuning
+from agent.platform.config import (
     MAX_ROBOTS,
     MAX_SEED,
-    AgentTuning,
     ConfigError,
     bounded,
     bounds,
@@ -53,7 +53,7 @@ from agent.config import (
     toml_fields,
     toml_value,
 )
-from agent.estimation.geometry import Vec2
+from agent.platform.geometry import Vec2
 
 MAX_PHYSICS_HZ = 100_000.0
 """Physics steps per second, at most."""
@@ -195,7 +195,8 @@ class Actuators:
 class Floor:
     """The floor the load must stay on: limits on its COM's travel from where it started, its
     speed and its angular speed. The agents keep to it by their force laws (the damping and the
-    reversing push of :mod:`agent.phase_machine`); each run's results check the truth against it
+    reversing push of :mod:`agent.algorithm.phase_machine`); each run's results check the truth
+    against it
     (:func:`simulator.results.floor_check`)."""
 
     travel_m: float = bounded(3.0, 0, 1000, "m", open_low=True)

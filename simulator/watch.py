@@ -9,7 +9,7 @@ secured), follows what the robots and the plant say through the launcher's
 table of every robot's estimates against the truth, and the results JSON.
 
 A halted team is not the end of a run here: robots come back (a link up again, an agent
-restarted by its unit), and the team begins again (:mod:`agent.coordination`). The watcher
+restarted by its unit), and the team begins again (:mod:`agent.algorithm.coordination`). The watcher
 gives it ``rejoin_s`` to do so. Verdicts (``reason``):
 
 - the team done → converged (``""``);
@@ -29,8 +29,8 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
-from agent.protocol import Control, Keys, encode
-from agent.zenoh_session import ZenohSettings, open_session
+from agent.platform.protocol import Control, Keys, encode
+from agent.platform.zenoh_session import ZenohSettings, open_session
 
 if TYPE_CHECKING:  # (the command line reads this module's defaults: it stays light)
     from simulator.inprocess import RunOutcome

@@ -205,7 +205,7 @@ def loadable_copy(path: Path, folder: Path) -> Path:
     robots only; the agent checks only that they are readable when it loads the file)."""
     tls = folder / "tls"
     tls.mkdir(exist_ok=True)
-    from agent.zenoh_session import TLS_FILES
+    from agent.platform.zenoh_session import TLS_FILES
 
     text = path.read_text(encoding="utf-8")
     for key in TLS_FILES:

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
-from agent.children import Child, stop_all
+from agent.platform.children import Child, stop_all
 from tests.conftest import ROOT
 
 SUBNET = "10.77.0"

@@ -19,7 +19,7 @@ import struct
 import sys
 import time
 
-from agent.protocol import (
+from agent.platform.protocol import (
     WIRE_VERSION,
     Command,
     Control,
@@ -31,7 +31,7 @@ from agent.protocol import (
     Status,
     encode,
 )
-from agent.zenoh_session import ZenohSettings, open_session, tick_publisher
+from agent.platform.zenoh_session import ZenohSettings, open_session, tick_publisher
 
 FAR = 2**40 - 1
 

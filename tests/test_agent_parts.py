@@ -1,10 +1,12 @@
 """The agent's parts on scripted input: no plant, every message and sample built by hand.
 
-- :class:`~agent.inbox.Inbox`: which instants can be estimated, early, late and bad messages;
-- :class:`~agent.phase_machine.PhaseMachine`: the switch tick the team agrees on, a halt
+- :class:`~agent.algorithm.inbox.Inbox`: which instants can be estimated, early, late and
+  bad messages;
+- :class:`~agent.algorithm.phase_machine.PhaseMachine`: the switch tick the team agrees on, a halt
   spreading through messages, and the force laws (kick, spin-up, inertia torque with its
   reversals, push), on scripted estimates of its own robot;
-- :class:`~agent.agent.Agent`: the parts composed, on a rigid body's exact contact velocities.
+- :class:`~agent.algorithm.agent.Agent`: the parts composed, on a rigid body's exact contact
+  velocities.
 """
 
 from __future__ import annotations
@@ -15,15 +17,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pytest
 
-from agent.agent import Agent
-from agent.config import AgentConfig, AgentTuning, Estimators
-from agent.estimation.excitation import kick_force, spin_up_force
-from agent.estimation.geometry import Vec2, cross, rotate
-from agent.estimation.settling import SettleDetectors
-from agent.inbox import HISTORY_TICKS, Inbox
-from agent.phase_machine import PhaseMachine
-from agent.protocol import Measurement, Phase, Share
-from agent.resend import ResendTimeout
+from agent.algorithm.agent import Agent
+from agent.algorithm.estimation.excitation import kick_force, spin_up_force
+from agent.algorithm.estimation.settling import SettleDetectors
+from agent.algorithm.inbox import HISTORY_TICKS, Inbox
+from agent.algorithm.phase_machine import PhaseMachine
+from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
+from agent.platform.geometry import Vec2, cross, rotate
+from agent.platform.protocol import Measurement, Phase, Share
+from agent.platform.resend import ResendTimeout
 
 DT = 0.01
 TUNING = AgentTuning(kick_duration_s=0.05, switch_margin_ticks=2)

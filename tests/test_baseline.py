@@ -11,8 +11,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agent.dispatch import main
-from agent.protocol import Keys
+from agent.platform.dispatch import main
+from agent.platform.protocol import Keys
 from dashboard.recorder import Recorder
 from simulator.baseline import fit, read_recording
 from simulator.plant import Plant

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from agent.dispatch import main
-from agent.protocol import Command, Measurement
-from bridge import benchmark
-from bridge.benchmark import (
+from agent.platform.dispatch import main
+from agent.platform.protocol import Command, Measurement
+from bridge.bench import can as benchmark
+from bridge.bench.can import (
     FORCE_STEP,
     TICK_BASE,
     VELOCITY_STEP,
@@ -34,8 +34,8 @@ from bridge.benchmark import (
 )
 from bridge.codec import AgvCodec, AppliedForce, ForceCommand, Odometry
 from bridge.config import load_bridge_config
-from bridge.echo_agent import echo
-from bridge.rig import bridge_toml, cpu_seconds
+from bridge.devtools.echo_agent import echo
+from bridge.devtools.rig import bridge_toml, cpu_seconds
 
 
 # ------------------------------------------------------------------------------ percentiles
@@ -124,11 +124,11 @@ def test_where_the_figures_were_measured() -> None:
 
 
 def test_vcan_problem_names_what_is_missing(tmp_path: Path, monkeypatch) -> None:
-    import bridge.vcan
+    import bridge.devtools.vcan
 
-    monkeypatch.setattr(bridge.vcan, "socketcan_available", lambda: False)
+    monkeypatch.setattr(bridge.devtools.vcan, "socketcan_available", lambda: False)
     assert vcan_problem("vcan8", tmp_path) == "this kernel has no SocketCAN"
-    monkeypatch.setattr(bridge.vcan, "socketcan_available", lambda: True)
+    monkeypatch.setattr(bridge.devtools.vcan, "socketcan_available", lambda: True)
     assert vcan_problem("vcan8", tmp_path) == "there is no interface vcan8"
     (tmp_path / "vcan8").mkdir()
     assert vcan_problem("vcan8", tmp_path) is None

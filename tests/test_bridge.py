@@ -12,10 +12,10 @@ import time
 import can
 import pytest
 
-from agent.config import ConfigError
-from agent.process import RejectLog
-from agent.protocol import BridgeStatus, Command, Measurement, decode, encode
-from agent.robot_io import AgentsPort
+from agent.platform.config import ConfigError
+from agent.platform.process import RejectLog
+from agent.platform.protocol import BridgeStatus, Command, Measurement, decode, encode
+from agent.platform.robot_io import AgentsPort
 from bridge.bridge import CAN_ERR_BUSOFF, Bridge
 from bridge.codec import (
     AgvCodec,

@@ -16,12 +16,12 @@ import time
 import can
 import pytest
 
-from agent.faults import FaultSettings, FaultyTransport
 from agent.node import AgentNode, AgentNodeConfig
-from agent.process import EventQueue, RejectLog
-from agent.protocol import Command, Estimates, Measurement, Phase, Truth
-from agent.robot_io import AgentsPort, InMemoryRobots, Liveliness
-from agent.transport import InMemoryTransport
+from agent.platform.faults import FaultSettings, FaultyTransport
+from agent.platform.process import EventQueue, RejectLog
+from agent.platform.protocol import Command, Estimates, Measurement, Phase, Truth
+from agent.platform.robot_io import AgentsPort, InMemoryRobots, Liveliness
+from agent.platform.transport import InMemoryTransport
 from bridge.codec import (
     AgvCodec,
     AppliedForce,
@@ -515,7 +515,7 @@ def test_an_event_queue_is_shared_with_the_other_side(rig) -> None:
     ],
 )
 def test_bad_can_options_are_one_line_and_status_2(args, words, capsys) -> None:
-    from agent.dispatch import main
+    from agent.platform.dispatch import main
 
     code = main(args)
     out, err = capsys.readouterr()
@@ -550,7 +550,7 @@ def test_sim_says_which_bus_it_cannot_open_with_status_4() -> None:
 def test_heft_run_can_in_one_process_is_the_quantised_reference(tmp_path, capsys) -> None:
     import json
 
-    from agent.dispatch import main
+    from agent.platform.dispatch import main
 
     path = PAPER
     out = tmp_path / "results.json"

@@ -1,6 +1,6 @@
 """The ``heft`` command line: ``heft run`` on the paper's scenario end to end (exit status,
 results JSON, plots), bad input, every subcommand's ``--help``, and the dispatcher
-(agent/dispatch.py) that gathers the packages' commands."""
+(agent/platform/dispatch.py) that gathers the packages' commands."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from agent.dispatch import GROUP, main
+from agent.platform.dispatch import GROUP, main
 from tests.conftest import PAPER, ROOT
 
 PLOTS = ("relative_positions.png", "inertia_mass.png", "com_observer.png")
@@ -145,7 +145,7 @@ def test_scenario_generate_writes_a_loadable_scenario(tmp_path: Path) -> None:
 
 
 def test_bench_help_shows_the_benchmark_default(capsys: pytest.CaptureFixture[str]) -> None:
-    from simulator.benchmark import DEFAULT_REPEAT
+    from simulator.bench.accuracy import DEFAULT_REPEAT
 
     with pytest.raises(SystemExit):
         main(["bench", "--help"])

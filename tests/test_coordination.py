@@ -1,4 +1,5 @@
-"""The phase barrier (``agent.coordination``) and the in-memory transport (``agent.transport``).
+"""The phase barrier (``agent.algorithm.coordination``) and the in-memory transport
+(``agent.platform.transport``).
 
 The barrier is simulated as the agents run it: each tick every agent first receives what its
 neighbours sent after their step of the previous tick (through :class:`InMemoryTransport`), then
@@ -12,9 +13,9 @@ from collections.abc import Callable
 
 import pytest
 
-from agent.coordination import PhaseBarrier
-from agent.protocol import Phase, Share
-from agent.transport import InMemoryTransport, neighbour_map
+from agent.algorithm.coordination import PhaseBarrier
+from agent.platform.protocol import Phase, Share
+from agent.platform.transport import InMemoryTransport, neighbour_map
 
 MARGIN = 3
 

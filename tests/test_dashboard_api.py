@@ -13,8 +13,8 @@ import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
-from agent.dispatch import main
-from agent.protocol import Estimates, Phase
+from agent.platform.dispatch import main
+from agent.platform.protocol import Estimates, Phase
 from dashboard.app import AppSettings, create_app
 from dashboard.geometry import LoadGeometry
 from dashboard.hub import Hub

@@ -1,11 +1,11 @@
-"""The dashboard benchmark's arithmetic (dashboard/benchmark.py): latency from publication to
+"""The dashboard benchmark's arithmetic (dashboard/bench/streaming.py): latency from publication to
 the first frame that shows an estimate, and memory growth once the buffers are full."""
 
 from __future__ import annotations
 
 import math
 
-from dashboard.benchmark import BenchReport, BenchSettings, estimates, latencies, truth
+from dashboard.bench.streaming import BenchReport, BenchSettings, estimates, latencies, truth
 from dashboard.state import TeamState
 
 

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.faults import FaultSettings
-from agent.protocol import Control, Keys, encode
-from agent.zenoh_session import ZenohSettings, open_session
+from agent.platform.faults import FaultSettings
+from agent.platform.protocol import Control, Keys, encode
+from agent.platform.zenoh_session import ZenohSettings, open_session
 from dashboard.companion import RunCompanion
 from simulator.launcher import robot_toml
 from simulator.scenario import load_scenario

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from agent.protocol import Command, Estimates, Keys, Measurement, Phase, encode
-from agent.zenoh_session import ZenohSettings, open_session
+from agent.platform.protocol import Command, Estimates, Keys, Measurement, Phase, encode
+from agent.platform.zenoh_session import ZenohSettings, open_session
 from dashboard.geometry import LoadGeometry
 from dashboard.recorder import Recorder
 from dashboard.replay import Recording, RecordingError, Replayer

@@ -12,7 +12,7 @@ import math
 
 import pytest
 
-from agent.protocol import (
+from agent.platform.protocol import (
     KINDS,
     BridgeStatus,
     Clock,

@@ -31,9 +31,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.dispatch import build_parser
 from agent.node import load_agent_config
-from agent.zenoh_session import TLS_FILES
+from agent.platform.dispatch import build_parser
+from agent.platform.zenoh_session import TLS_FILES
 from tests.conftest import ROOT, TLS_DIR, loadable_copy
 
 DEPLOY = ROOT / "deploy"

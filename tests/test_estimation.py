@@ -1,4 +1,5 @@
-"""The estimators of ``agent.estimation`` (and ``agent.safety``) against closed forms.
+"""The estimators of ``agent.algorithm.estimation`` (and ``agent.algorithm.safety``) against closed
+forms.
 
 Every expected value is computed here, independently of the code under test: rotation matrices
 and ``Q = [[0, -1], [1, 0]]`` in numpy, analytic trajectories (``y = θ sin t``, uniformly or
@@ -20,22 +21,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.estimation.angular_velocity import angular_velocity
-from agent.estimation.centroid import MAX_MASS_INFORMATION, CentroidConsensus, mass_input
-from agent.estimation.com_observer import ComObserver
-from agent.estimation.com_regression import ComRegression
-from agent.estimation.com_velocity import com_velocity
-from agent.estimation.consensus import metropolis_weight
-from agent.estimation.estimator import Estimator
-from agent.estimation.excitation import kick_force, spin_up_force
-from agent.estimation.filtered_regression import FilteredRegression
-from agent.estimation.geometry import angle_between, arc_factor, cross, rotate
-from agent.estimation.inertia import InertiaEstimator, inertia_force
-from agent.estimation.mass import MassEstimator
-from agent.estimation.relative_position import RelativePosition
-from agent.estimation.settling import SettleDetector, SettleDetectors
-from agent.protocol import Share
-from agent.safety import saturate
+from agent.algorithm.estimation.angular_velocity import angular_velocity
+from agent.algorithm.estimation.centroid import MAX_MASS_INFORMATION, CentroidConsensus, mass_input
+from agent.algorithm.estimation.com_observer import ComObserver
+from agent.algorithm.estimation.com_regression import ComRegression
+from agent.algorithm.estimation.com_velocity import com_velocity
+from agent.algorithm.estimation.consensus import metropolis_weight
+from agent.algorithm.estimation.estimator import Estimator
+from agent.algorithm.estimation.excitation import kick_force, spin_up_force
+from agent.algorithm.estimation.filtered_regression import FilteredRegression
+from agent.algorithm.estimation.inertia import InertiaEstimator, inertia_force
+from agent.algorithm.estimation.mass import MassEstimator
+from agent.algorithm.estimation.relative_position import RelativePosition
+from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
+from agent.algorithm.safety import saturate
+from agent.platform.geometry import angle_between, arc_factor, cross, rotate
+from agent.platform.protocol import Share
 
 Q = np.array([[0.0, -1.0], [1.0, 0.0]])
 FAST = settings(max_examples=50, deadline=None)

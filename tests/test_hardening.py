@@ -22,8 +22,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.node import AgentNode, AgentNodeConfig, zenoh_agent_node
-from agent.process import RejectLog
-from agent.protocol import (
+from agent.platform.process import RejectLog
+from agent.platform.protocol import (
     DOMAINS,
     Command,
     Control,
@@ -36,7 +36,7 @@ from agent.protocol import (
     Status,
     encode,
 )
-from agent.zenoh_robot_io import ZenohAgentsPort
+from agent.platform.zenoh_robot_io import ZenohAgentsPort
 from simulator.inprocess import run_inprocess
 from simulator.launcher import Collector
 from simulator.node import PlantNode
@@ -379,7 +379,7 @@ def test_a_realtime_run_over_zenoh_shrugs_off_forged_messages(monkeypatch) -> No
     import io
     import os
 
-    from agent.zenoh_session import ZenohSettings, open_session
+    from agent.platform.zenoh_session import ZenohSettings, open_session
     from simulator import launcher
     from tests.conftest import assert_within
 

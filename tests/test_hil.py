@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.protocol import BridgeStatus
+from agent.platform.protocol import BridgeStatus
 from bridge.bridge import CAN_ERR_BUSOFF
 from bridge.codec import (
     AgvCodec,
@@ -27,7 +27,7 @@ from bridge.codec import (
     Odometry,
     Sync,
 )
-from bridge.rig import BridgeRig
+from bridge.devtools.rig import BridgeRig
 from simulator.can_drivers import CanLink
 from simulator.inprocess import run_inprocess
 from simulator.launcher import run_zenoh
@@ -152,8 +152,8 @@ def test_lockstep_over_can_reproduces_the_inprocess_can_run(tmp_path: Path) -> N
 
 # ------------------------------------------------------------------------------ one bridge
 class Rig:
-    """A :class:`~bridge.rig.BridgeRig` on :data:`RIG_CHANNEL` (router, ``heft bridge`` with a
-    100 ms watchdog under ``SCHED_FIFO``, as on a robot, and the echo agent), and here AGV
+    """A :class:`~bridge.devtools.rig.BridgeRig` on :data:`RIG_CHANNEL` (router, ``heft bridge``
+    with a 100 ms watchdog under ``SCHED_FIFO``, as on a robot, and the echo agent), and here AGV
     node 1's driver: a tick every 10 ms (Sync, Odometry, AppliedForce), a heartbeat every
     100 ms; and a reader of the bridge's ``ForceCommand`` frames (a kernel filter keeps the
     rest out of its socket) with their kernel timestamps. :attr:`sent` counts every frame

@@ -4,7 +4,7 @@ Values that once gave tracebacks or hangs (a memory of 1e-300 s, a window of 1e3
 physics steps a second, a sensor at 1e-9 Hz, a start timeout of NaN, a team of 200, a port of
 99999) get exit status 2 and one ``heft: error:`` line naming the key and its range; a busy
 port or no router gets one line too, with exit status 4 (worth retrying). Every declared range
-(:func:`agent.config.bounded`) is tested at both ends: a value just inside is accepted, one
+(:func:`agent.platform.config.bounded`) is tested at both ends: a value just inside is accepted, one
 just outside refused with the key named; and the README's "Limits" section lists each of them.
 """
 
@@ -23,11 +23,12 @@ from typing import Any
 
 import pytest
 
-from agent.children import free_port
-from agent.config import MAX_ROBOTS, MAX_SEED, AgentTuning, Bound, bounds, toml_value
-from agent.dispatch import main
+from agent.algorithm.tuning import AgentTuning
 from agent.node import AgentNodeConfig, load_agent_config
-from agent.zenoh_session import SessionError, ZenohSettings, open_session
+from agent.platform.children import free_port
+from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds, toml_value
+from agent.platform.dispatch import main
+from agent.platform.zenoh_session import SessionError, ZenohSettings, open_session
 from simulator.scenario import (
     MAX_COORDINATE,
     MAX_POSITION,

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.dispatch import GROUP, main
+from agent.platform.dispatch import GROUP, main
 from tests.conftest import ROOT
 
 PRODUCT_PACKAGES = ("agent", "simulator", "bridge", "dashboard")
@@ -42,7 +42,7 @@ def test_the_distribution_ships_only_the_products_packages() -> None:
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     include = pyproject["tool"]["setuptools"]["packages"]["find"]["include"]
     assert {pattern.rstrip("*") for pattern in include} <= set(PRODUCT_PACKAGES), include
-    assert pyproject["project"]["scripts"] == {"heft": "agent.dispatch:main"}
+    assert pyproject["project"]["scripts"] == {"heft": "agent.platform.dispatch:main"}
     declared = pyproject["project"]["entry-points"][GROUP]
     assert set(declared) <= set(PRODUCT_PACKAGES), declared
     for package, target in declared.items():
@@ -125,7 +125,7 @@ def test_imported_names_sees_every_import(tmp_path: Path) -> None:
     path = tmp_path / "mod.py"
     path.write_text(
         "from typing import TYPE_CHECKING\n"
-        "import agent.protocol\n"
+        "import agent.platform.protocol\n"
         "if TYPE_CHECKING:\n"
         "    from simulator.inprocess import RunOutcome\n"
         "def f():\n"
@@ -134,13 +134,13 @@ def test_imported_names_sees_every_import(tmp_path: Path) -> None:
         encoding="utf-8",
     )
     names = imported_names(path, "simulator.cli")
-    assert {"agent.protocol", "simulator.inprocess", "simulator.results"} <= names
+    assert {"agent.platform.protocol", "simulator.inprocess", "simulator.results"} <= names
     assert {"simulator.plots", "simulator.plots.write_plots"} <= names
 
 
 def test_no_import_cycle_between_the_products_modules() -> None:
     graph = import_graph()
-    assert "agent.dispatch" in graph and "simulator.cli" in graph
+    assert "agent.platform.dispatch" in graph and "simulator.cli" in graph
     assert "simulator.inprocess" in graph["simulator.cli"]  # a function-level import
     cycle = find_cycle(graph)
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
@@ -163,15 +163,15 @@ def modules_loaded_by(code: str) -> list[str]:
 def test_the_protocol_and_the_zenoh_session_load_nothing_heavy() -> None:
     """A bridge or a display reads the team's messages without the plant, the estimator's
     numerics or a plotting library."""
-    loaded = modules_loaded_by("import agent.protocol, agent.zenoh_session")
-    assert "agent.protocol" in loaded and "agent.zenoh_session" in loaded
+    loaded = modules_loaded_by("import agent.platform.protocol, agent.platform.zenoh_session")
+    assert "agent.platform.protocol" in loaded and "agent.platform.zenoh_session" in loaded
     heavy = [name for name in loaded if name.split(".")[0] in (*HEAVY, "simulator")]
     assert heavy == []
 
 
 def test_building_the_heft_parser_loads_nothing_heavy() -> None:
     """``heft agent`` on a robot does not pay for the simulator's libraries."""
-    loaded = modules_loaded_by("from agent.dispatch import build_parser\nbuild_parser()")
+    loaded = modules_loaded_by("from agent.platform.dispatch import build_parser\nbuild_parser()")
     assert "simulator.cli" in loaded and "agent.cli" in loaded
     assert [name for name in loaded if name.split(".")[0] in HEAVY] == []
 

@@ -10,9 +10,9 @@ import tomllib
 
 import pytest
 
-from agent.coordination import PhaseBarrier
-from agent.estimation.load_change import ProbeFit
-from agent.protocol import Phase, Share, decode, encode
+from agent.algorithm.coordination import PhaseBarrier
+from agent.algorithm.estimation.load_change import ProbeFit
+from agent.platform.protocol import Phase, Share, decode, encode
 from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
 from simulator.inprocess import run_inprocess

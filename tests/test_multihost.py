@@ -17,10 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from agent.children import stop_all
-from agent.config import to_toml
-from agent.protocol import Phase, PlantStatus, Status, Truth
-from agent.zenoh_session import ZenohSettings
+from agent.platform.children import stop_all
+from agent.platform.config import to_toml
+from agent.platform.protocol import Phase, PlantStatus, Status, Truth
+from agent.platform.zenoh_session import ZenohSettings
 from simulator.launcher import robot_config
 from simulator.scenario import load_scenario
 from tests.conftest import ROOT
@@ -53,8 +53,8 @@ class Network:
     process runs on the router's host, on 127.0.0.1 (the latency's reference)."""
 
     def __init__(self, hosts: Hosts, folder: Path, loopback: bool = False):
-        from agent.access_control import router_config_text
-        from agent.certificates import make_certificates, team_identities
+        from agent.security.access_control import router_config_text
+        from agent.security.certificates import make_certificates, team_identities
 
         self.hosts = hosts
         self.folder = folder

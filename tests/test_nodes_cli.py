@@ -28,13 +28,14 @@ from pathlib import Path
 
 import pytest
 
-from agent.command_line import UsageError, add_zenoh_options, zenoh_settings
-from agent.config import AgentTuning, ConfigError, from_table
-from agent.dispatch import main
-from agent.faults import FaultSettings
+from agent.algorithm.tuning import AgentTuning
 from agent.node import AgentNodeConfig, load_agent_config
-from agent.protocol import CLOCKS
-from agent.zenoh_session import DEFAULT_ROUTER, ZenohSettings, zenoh_config
+from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_settings
+from agent.platform.config import ConfigError, from_table
+from agent.platform.dispatch import main
+from agent.platform.faults import FaultSettings
+from agent.platform.protocol import CLOCKS
+from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings, zenoh_config
 from simulator.launcher import robot_toml
 from simulator.scenario import load_scenario
 from tests.conftest import PAPER, ROOT, loadable_copy
@@ -259,7 +260,10 @@ CASES = {
     "faults-drop-1.5": (toml_text(BASE, faults={"drop": 1.5}), "agent.faults.drop"),
     "faults-drop-1": (toml_text(BASE, faults={"drop": 1.0}), "agent.faults.drop"),
     "faults-drop-negative": (toml_text(BASE, faults={"drop": -0.1}), "agent.faults.drop"),
-    "faults-negative-delay": (toml_text(BASE, faults={"delay_s": -0.01}), "agent.faults.delay_s"),
+    "faults-negative-delay": (
+        toml_text(BASE, faults={"delay_s": -0.01}),
+        "agent.faults.delay_s",
+    ),
     "tuning-unknown": (toml_text(BASE, tuning={"max_speed": 1.0}), "agent.tuning.max_speed"),
     "tuning-negative": (toml_text(BASE, tuning={"max_force": -1.0}), "agent.tuning.max_force"),
     "tuning-kick-above-max": (

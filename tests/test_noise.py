@@ -16,8 +16,8 @@ import dataclasses
 
 import pytest
 
-from agent.config import Estimators
-from agent.protocol import Phase
+from agent.algorithm.tuning import Estimators
+from agent.platform.protocol import Phase
 from simulator.inprocess import run_inprocess
 from simulator.results import format_table, intervals, results_dict
 from simulator.scenario import load_scenario

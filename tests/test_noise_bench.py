@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from simulator.noise_bench import (
+from simulator.bench.noise import (
     NoiseSettings,
     SeedResult,
     coverage,
@@ -103,7 +103,7 @@ def test_bench_noise_options(args: list[str], message: str) -> None:
 
 
 def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:
-    from simulator.change_bench import ChangeResult, format_change_report
+    from simulator.bench.changes import ChangeResult, format_change_report
 
     def row(seed: int, case: str, mass: float) -> ChangeResult:
         return ChangeResult(
@@ -129,7 +129,7 @@ def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:
 
 
 def test_the_seeds_run_start_at_first_seed(monkeypatch) -> None:
-    import simulator.noise_bench as bench
+    import simulator.bench.noise as bench
 
     seen = []
     monkeypatch.setattr(bench, "run_seed", lambda scenario, settings, seed: seen.append(seed))

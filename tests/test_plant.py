@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.estimation.geometry import Vec2
-from agent.protocol import Truth
+from agent.platform.geometry import Vec2
+from agent.platform.protocol import Truth
 from simulator.plant import Plant
 from simulator.scenario import Actuators, Scenario, Sensors, load_scenario
 

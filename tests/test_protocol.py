@@ -1,5 +1,5 @@
-"""The wire protocol (agent/protocol.py): every message survives encode → decode unchanged, and
-whatever else arrives — short, foreign, corrupt, hostile — makes ``decode`` raise
+"""The wire protocol (agent/platform/protocol.py): every message survives encode → decode unchanged,
+and whatever else arrives — short, foreign, corrupt, hostile — makes ``decode`` raise
 :class:`DecodeError` and nothing else (the agents and the launcher count those and carry on).
 Also the key expressions of a team."""
 
@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.protocol import (
+from agent.platform.protocol import (
     DOMAINS,
     KINDS,
     WIRE_VERSION,

@@ -1,6 +1,6 @@
 """A halted team begins again once every robot is back: the barrier's generations, and agents
-that drop what they knew and estimate the load anew from Step 1 (agent/coordination.py,
-agent/agent.py)."""
+that drop what they knew and estimate the load anew from Step 1 (agent/algorithm/coordination.py,
+agent/algorithm/agent.py)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import dataclasses
 
 import pytest
 
-from agent.coordination import PhaseBarrier
-from agent.protocol import Phase, Share, decode, encode
-from agent.transport import InMemoryTransport
+from agent.algorithm.coordination import PhaseBarrier
+from agent.platform.protocol import Phase, Share, decode, encode
+from agent.platform.transport import InMemoryTransport
 from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
 from simulator.inprocess import make_agents
@@ -157,7 +157,7 @@ def test_agents_halted_mid_run_begin_again_and_estimate_the_load_as_well() -> No
 
 def _stepped(robot: int, ticks: int):
     """Robot ``robot`` of the paper's team after ``ticks`` ticks alone (no neighbour heard)."""
-    from agent.protocol import Measurement
+    from agent.platform.protocol import Measurement
 
     agent = make_agents(load_scenario(PAPER))[robot - 1]
     for k in range(ticks):
@@ -197,7 +197,7 @@ class _Session:
 
 
 def test_the_collector_follows_the_generations_of_a_team_that_begins_again() -> None:
-    from agent.protocol import Estimates, Keys, Status
+    from agent.platform.protocol import Estimates, Keys, Status
     from simulator.launcher import Collector
 
     keys = Keys("t")

@@ -1,4 +1,4 @@
-"""The robot-I/O seam (agent/robot_io.py): the agent and plant nodes run unchanged on its
+"""The robot-I/O seam (agent/platform/robot_io.py): the agent and plant nodes run unchanged on its
 in-memory back-end, in lockstep, and reproduce the in-process run exactly; the in-memory hub
 delivers measurements and commands to the right robot only, and liveliness and stop to those
 who must hear them."""
@@ -11,12 +11,12 @@ import time
 
 import pytest
 
-from agent.faults import FaultSettings, FaultyTransport
 from agent.node import AgentNode, AgentNodeConfig
-from agent.process import RejectLog
-from agent.protocol import Command, Control, Estimates, Measurement, Phase, Truth
-from agent.robot_io import InMemoryRobots, Liveliness
-from agent.transport import InMemoryTransport
+from agent.platform.faults import FaultSettings, FaultyTransport
+from agent.platform.process import RejectLog
+from agent.platform.protocol import Command, Control, Estimates, Measurement, Phase, Truth
+from agent.platform.robot_io import InMemoryRobots, Liveliness
+from agent.platform.transport import InMemoryTransport
 from simulator.inprocess import run_inprocess
 from simulator.node import PlantNode
 from simulator.scenario import Scenario, load_scenario

@@ -10,19 +10,20 @@ import math
 import numpy as np
 import pytest
 
-from agent.config import AgentConfig, AgentTuning, ConfigError, Estimators, from_table, to_toml
-from agent.estimation.arc_fit import ArcRelativePosition
-from agent.estimation.com_fit import ComFit
-from agent.estimation.drive_gain import DriveGain
-from agent.estimation.estimator import Estimator
-from agent.estimation.geometry import rotate
-from agent.estimation.inertia_fit import InertiaFit
-from agent.estimation.least_squares import LeastSquares
-from agent.estimation.mass_fit import MassFit
-from agent.estimation.relative_position import RelativePosition
-from agent.estimation.settling import SettleDetector, SettleDetectors
-from agent.phase_machine import PhaseMachine
-from agent.protocol import Phase
+from agent.algorithm.estimation.arc_fit import ArcRelativePosition
+from agent.algorithm.estimation.com_fit import ComFit
+from agent.algorithm.estimation.drive_gain import DriveGain
+from agent.algorithm.estimation.estimator import Estimator
+from agent.algorithm.estimation.inertia_fit import InertiaFit
+from agent.algorithm.estimation.least_squares import LeastSquares
+from agent.algorithm.estimation.mass_fit import MassFit
+from agent.algorithm.estimation.relative_position import RelativePosition
+from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
+from agent.algorithm.phase_machine import PhaseMachine
+from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
+from agent.platform.config import ConfigError, from_table, to_toml
+from agent.platform.geometry import rotate
+from agent.platform.protocol import Phase
 
 DT = 0.01
 
@@ -318,7 +319,7 @@ def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -
 # ------------------------------------------------------------------------------ the push reverses
 def _reversing_push(seconds: float, flip_s: float, lag: float = 0.0):
     """The common force's sign each tick (``+`` for ``T/2``, then ``−``, ``+`` for ``T``
-    each, as :meth:`~agent.phase_machine.PhaseMachine.push_sign`) and the sign each drive
+    each, as :meth:`~agent.algorithm.phase_machine.PhaseMachine.push_sign`) and the sign each drive
     applies after its first-order lag ``lag``, averaged over the tick (fine steps)."""
     period, fine = round(flip_s / DT), 100
     commanded, applied, level = [], [], 0.0

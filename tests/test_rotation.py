@@ -1,4 +1,4 @@
-"""The team's rotation (agent/estimation/rotation.py): the consensus on the robots' levels
+"""The team's rotation (agent/algorithm/estimation/rotation.py): the consensus on the robots' levels
 averages their turns' noise away without lag, whatever the graph and however late a message."""
 
 from __future__ import annotations
@@ -10,14 +10,14 @@ import statistics
 
 import pytest
 
-from agent.estimation.rotation import (
+from agent.algorithm.estimation.rotation import (
     RotationConsensus,
     delay_factor,
     own_turn,
     turn_weight,
     wrapped,
 )
-from agent.protocol import Share, decode, encode
+from agent.platform.protocol import Share, decode, encode
 
 LINE = {1: (2,), 2: (1, 3), 3: (2, 4), 4: (3,)}
 

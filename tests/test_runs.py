@@ -16,8 +16,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent.protocol import Phase, Share
-from agent.transport import InMemoryTransport
+from agent.platform.protocol import Phase, Share
+from agent.platform.transport import InMemoryTransport
 from simulator.generate import generate_scenario
 from simulator.inprocess import RunOutcome, make_agents, run_inprocess
 from simulator.plant import Plant
@@ -215,9 +215,9 @@ def test_agent_package_never_imports_the_plant_or_the_harness() -> None:
 
 
 def test_an_agent_rejects_unusable_shares() -> None:
-    from agent.agent import Agent
-    from agent.config import AgentConfig
-    from agent.protocol import Measurement
+    from agent.algorithm.agent import Agent
+    from agent.algorithm.tuning import AgentConfig
+    from agent.platform.protocol import Measurement
 
     agent = Agent(AgentConfig(robot=1, n=2, neighbours=(2,), period_s=0.01))
     bad = [
@@ -234,7 +234,7 @@ def test_an_agent_rejects_unusable_shares() -> None:
 @pytest.mark.parametrize("which", ["paper", 0, 5, 11])
 def test_ten_percent_of_messages_lost_still_converges(which) -> None:
     """Lost messages break the zero-sum invariant of plain consensus; flow updating keeps it."""
-    from agent.faults import FaultSettings, FaultyTransport
+    from agent.platform.faults import FaultSettings, FaultyTransport
 
     scenario = load_scenario(PAPER) if which == "paper" else generate_scenario(which)
     lossy = FaultyTransport(

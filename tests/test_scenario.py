@@ -14,8 +14,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.config import AgentTuning, ConfigError
-from agent.dispatch import main
+from agent.algorithm.tuning import AgentTuning
+from agent.platform.config import ConfigError
+from agent.platform.dispatch import main
 from simulator.generate import GRAPH_KINDS, generate_scenario
 from simulator.scenario import (
     Scenario,

@@ -1,6 +1,7 @@
 """The secured Zenoh network: mutual TLS with the team's certificates and the router's access
-control by identity (agent/certificates.py, agent/access_control.py), the ``[zenoh]`` TLS
-settings and the plain-link rule (agent/zenoh_session.py), and ``heft deploy``.
+control by identity (agent/security/certificates.py, agent/security/access_control.py), the
+``[zenoh]`` TLS settings and the plain-link rule (agent/platform/zenoh_session.py), and ``heft
+deploy``.
 
 The network tests run a router on ``tls/127.0.0.1:PORT`` with the config ``heft deploy
 router-config`` makes, and clients of each identity; every refusal is shown by a subscriber
@@ -22,8 +23,20 @@ from pathlib import Path
 
 import pytest
 
-from agent import zenoh_session
-from agent.access_control import (
+from agent.platform import zenoh_session
+from agent.platform.children import free_port
+from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_settings
+from agent.platform.config import ConfigError
+from agent.platform.dispatch import main
+from agent.platform.protocol import Control, Keys, encode
+from agent.platform.zenoh_session import (
+    PLAIN_WARNING,
+    SessionError,
+    ZenohSettings,
+    open_session,
+    zenoh_config,
+)
+from agent.security.access_control import (
     AccessError,
     access_control,
     parse_edges,
@@ -31,22 +44,10 @@ from agent.access_control import (
     router_config_text,
     team_grants,
 )
-from agent.certificates import (
+from agent.security.certificates import (
     CertificateError,
     make_certificates,
     team_identities,
-)
-from agent.children import free_port
-from agent.command_line import UsageError, add_zenoh_options, zenoh_settings
-from agent.config import ConfigError
-from agent.dispatch import main
-from agent.protocol import Control, Keys, encode
-from agent.zenoh_session import (
-    PLAIN_WARNING,
-    SessionError,
-    ZenohSettings,
-    open_session,
-    zenoh_config,
 )
 from tests.conftest import ROOT
 

@@ -19,8 +19,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from agent.dispatch import main
-from agent.protocol import Estimates, Keys, Phase, Truth, encode
+from agent.platform.dispatch import main
+from agent.platform.protocol import Estimates, Keys, Phase, Truth, encode
 from simulator import launcher
 from simulator.scenario import load_scenario
 from tests.conftest import (

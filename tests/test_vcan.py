@@ -1,5 +1,5 @@
-"""``heft vcan`` (bridge/vcan.py, bridge/vcan_run.py): the pure parts (sizes, the guest's
-environment and init script, the filters of its output and console), then a few real runs
+"""``heft vcan`` (bridge/devtools/vcan.py, bridge/devtools/vcan_run.py): the pure parts (sizes, the
+guest's environment and init script, the filters of its output and console), then a few real runs
 (marked slow, each boots a User-Mode Linux guest in ~3-5 s where this kernel has no CAN):
 exit status and output passed through, vcan1 there, a CAN frame crossing processes on it,
 ``--check`` and a bad ``--memory``."""
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.vcan import (
+from bridge.devtools.vcan import (
     MAX_COUNT,
     MIN_MEMORY,
     SYSTEM_PATH,

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from agent.children import free_port
-from agent.faults import FaultSettings
 from agent.node import AgentNodeConfig, zenoh_agent_node
-from agent.protocol import Keys, Measurement, Share, encode
-from agent.zenoh_session import ZenohSettings, open_session
+from agent.platform.children import free_port
+from agent.platform.faults import FaultSettings
+from agent.platform.protocol import Keys, Measurement, Share, encode
+from agent.platform.zenoh_session import ZenohSettings, open_session
 from simulator.generate import generate_scenario
 from simulator.inprocess import run_inprocess
 from simulator.launcher import run_zenoh

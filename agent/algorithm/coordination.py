@@ -1,0 +1,109 @@
+"""How the team agrees on when to change what it applies (the paper's instants t_1..t_4).
+
+No robot decides for the team and none looks at global truth: each robot decides only whether
+*it* is ready to leave the current phase (its own estimates have settled). A phase barrier
+then makes the switch simultaneous:
+
+- every robot floods the set of robots it knows to be ready (a bitmask, merged by union with
+  the neighbours in the same phase);
+- a robot that sees all ``n`` robots ready proposes to switch at ``tick + n + margin``; proposals
+  are merged by min-consensus. The first proposal reaches every robot within ``n − 1`` ticks
+  (the graph's diameter is below ``n``), before it falls due, so every robot switches at the
+  same tick;
+- a robot that hears a neighbour already in a later phase (it missed messages) catches up at
+  once. ``halted``, the highest phase, spreads the same way.
+
+Once the team is ``done`` it watches the load (robust estimators): a robot whose probes say the
+load has changed is ready to *restart*, and one robot is enough — it proposes the restart as
+above, and at the agreed tick every robot begins a new *epoch* in the ``inertia`` phase (Steps
+4–7 again; the contacts' geometry, Steps 1–3, holds for the changed load). Phases compare by
+epoch first: a robot that hears a neighbour in a later epoch catches up with it.
+
+A halted team begins again once every robot is back (:mod:`agent.node` says when a robot's
+neighbours are all alive again): in ``halted`` a robot is ready when it has every neighbour,
+all ``n`` must be, and at the agreed tick every robot begins a new *generation* from Step 1
+(``excite``, epoch 0), with everything it had estimated dropped
+(:class:`agent.algorithm.agent.Agent` starts afresh). Generations come before everything else: a
+robot that hears a later one catches up with it, as with a later phase (it missed the agreed tick:
+in real time a proposal crosses the graph more slowly than one hop a tick; or it is a new process of
+a robot that was lost, joining the halted team); a neighbour's message of an earlier
+generation is ignored.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from agent.platform.protocol import Phase, Share
+
+
+class PhaseBarrier:
+    """One robot's view of the team's phase."""
+
+    def __init__(self, robot: int, n: int, margin: int):
+        self.robot = robot
+        self.n = n
+        self.margin = margin
+        self.all_ready = (1 << n) - 1
+        self.phase = Phase.EXCITE
+        self.ready = 0
+        """Bitmask of the robots known to be ready to leave ``phase`` (robot ``i`` is bit
+        ``i − 1``)."""
+        self.switch_at = -1
+        """The agreed tick of the switch to the next phase (``-1`` while none is agreed)."""
+        self.epoch = 0
+        """How many times the team has restarted for a changed load."""
+        self.generation = 0
+        """How many times the team has begun again after a halt."""
+
+    def _enter(self, phase: int, epoch: int) -> None:
+        self.phase = Phase(phase)
+        self.epoch = epoch
+        self.ready = 0
+        self.switch_at = -1
+
+    def halt(self) -> None:
+        """Jump to ``halted`` at once; neighbours catch up with it."""
+        self._enter(Phase.HALTED, self.epoch)
+
+    @staticmethod
+    def _order(generation: int, phase: Phase, epoch: int) -> tuple[int, bool, int, int]:
+        """Which of two team states is later: by generation, then ``halted`` last, then by
+        epoch, then phase."""
+        return (generation, phase == Phase.HALTED, epoch, phase)
+
+    def step(self, tick: int, own_ready: bool, shares: Iterable[Share]) -> bool:
+        """Merge the neighbours' views and our readiness; returns ``True`` if the phase
+        (or epoch, or generation) changed at this tick (the new one applies from ``tick`` on)."""
+        start = (self.phase, self.epoch, self.generation)
+        order = self._order
+        shares = [s for s in shares if s.generation >= self.generation]
+        latest = max(shares, key=lambda s: order(s.generation, s.phase, s.epoch), default=None)
+        if latest is not None and order(latest.generation, latest.phase, latest.epoch) > order(
+            self.generation, self.phase, self.epoch
+        ):
+            self.generation = latest.generation
+            self._enter(latest.phase, latest.epoch)
+        latest_proposal = tick + self.n + self.margin  # no robot can have proposed later
+        for s in shares:
+            if (s.phase, s.epoch, s.generation) == (self.phase, self.epoch, self.generation):
+                self.ready |= s.ready & self.all_ready  # bits of robots not in the team: none
+                if 0 <= s.switch_at <= latest_proposal and (
+                    self.switch_at < 0 or s.switch_at < self.switch_at
+                ):
+                    self.switch_at = s.switch_at
+        if own_ready and (self.phase, self.epoch, self.generation) == start:
+            self.ready |= 1 << (self.robot - 1)
+        # Leaving a phase takes every robot; restarting for a changed load, any one.
+        enough = self.ready != 0 if self.phase == Phase.DONE else self.ready == self.all_ready
+        if enough and self.switch_at < 0:
+            self.switch_at = tick + self.n + self.margin
+        if 0 <= self.switch_at <= tick:
+            if self.phase == Phase.DONE:
+                self._enter(Phase.INERTIA, self.epoch + 1)
+            elif self.phase == Phase.HALTED:
+                self.generation += 1
+                self._enter(Phase.EXCITE, 0)
+            else:
+                self._enter(self.phase + 1, self.epoch)
+        return (self.phase, self.epoch, self.generation) != start

@@ -1,0 +1,124 @@
+"""Step 5 under noise: ``z_C`` from the load's rotation angle while the team pushes.
+
+Under the common force ``s(t) f`` (eq. 17; the sign ``s = ±1`` reverses on the agreed clock,
+:meth:`~agent.algorithm.phase_machine.PhaseMachine.push_sign`) the torque about the COM is
+``n s (z_C⊥)ᵀ f``, so (eq. 18, as in :mod:`agent.algorithm.estimation.com_regression`) with
+``z_C(t) = R(α(t)) c``, ``α`` the rotation since the push began and ``c`` the offset then,
+
+    θ̈ = φ(t)ᵀ c,      φ(t) = s(t) (n/J) R(−α(t)) Qᵀ f.
+
+Integrating twice from the push's first instant ``t₀``,
+
+    θ(t) = θ₀ + ω₀ (t − t₀) + Ψ(t)ᵀ c,      Ψ(t) = ∫_{t₀}^{t} ∫_{t₀}^{s} φ dr ds,
+
+linear in ``(θ₀, ω₀, c_x, c_y)`` (a force ``a(t)`` that every robot adds to the push,
+``push_damping``'s, adds ``(n/J) R(−α) Qᵀ a`` to ``φ``; with the drives' lag ``τ_d`` from Step 4,
+``Ψ − τ_d ∫φ + τ_d² φ`` in place of ``Ψ``, as in :mod:`agent.algorithm.estimation.mass_fit`): least
+squares on the angle itself (tracked from the arc fits, :mod:`agent.algorithm.estimation.arc_fit`),
+never on a differentiated or filtered ω. Over an
+interval ``h`` the regressor's integrals grow by the trapezoid ``∫φ ≈ h (φ₀ + φ₁)/2`` (made
+exact for a uniform turn by :func:`~agent.platform.geometry.arc_factor`) and
+``∫∫φ ≈ h ∫φ(t) + h² (φ₀/3 + φ₁/6)``. ``c`` is determined once the load has turned enough
+for ``Ψ`` to span the plane (Prop. V.1: ω ≠ 0, f ≠ 0).
+
+Uncertainty: the fit's ``σ̂² M⁻¹`` for ``c``, scaled for the angle's correlated errors as in
+:mod:`agent.algorithm.estimation.inertia_fit`
+(:data:`~agent.algorithm.estimation.least_squares.CORRELATION_TIME`). It does not include the error
+of ``Ĵ``, which scales ``c`` (``c ∝ J``).
+"""
+
+from __future__ import annotations
+
+from agent.algorithm.estimation.estimator import largest_std
+from agent.algorithm.estimation.least_squares import RunFit
+from agent.platform.geometry import Vec2, arc_factor, rotate
+
+
+class ComFit(RunFit):
+    """Least-squares ``z_C`` from the rotation angle while the team pushes with ``f``."""
+
+    def __init__(
+        self, n: int, moment: float, force: Vec2, forgetting: float = 1.0, lag: float = 0.0
+    ):
+        super().__init__(4, forgetting)  # rows [1, t − t₀, Ψ_x, Ψ_y] (θ₀, ω₀, c_x, c_y) = α
+        k = n / moment
+        self.k = k
+        self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
+        self.lag = lag
+        self.started = False
+        self._alpha = 0.0
+        self._once: Vec2 = (0.0, 0.0)
+        """``∫φ`` since the first sample."""
+        self._twice: Vec2 = (0.0, 0.0)
+        """``Ψ = ∫∫φ`` since the first sample."""
+
+    def regressor(self, alpha: float) -> Vec2:
+        """``φ = (n/J) R(−α) Qᵀ f``."""
+        return rotate(self.base, -alpha)
+
+    def update(self, alpha: float, sign: float, dt: float, *, added: Vec2 = (0.0, 0.0)) -> None:
+        """Feed the rotation ``α`` since the push began, at the end of an interval ``dt``
+        during which the team pushed with the mean sign ``sign`` and each robot added the
+        mean force ``added`` (the first call, at the push's first instant, starts)."""
+        k = self.k
+        extra = (k * added[1], -k * added[0])  # (n/J) Qᵀ a
+        if self.started:
+            p0 = self.regressor(self._alpha)
+            phi = self.regressor(alpha)
+            e0, e1 = rotate(extra, -self._alpha), rotate(extra, -alpha)
+            p0 = (sign * p0[0] + e0[0], sign * p0[1] + e0[1])
+            phi = (sign * phi[0] + e1[0], sign * phi[1] + e1[1])
+            once, twice = self._once, self._twice
+            h = 0.5 * dt * arc_factor(alpha - self._alpha)
+            dd = dt * dt
+            self._twice = (
+                twice[0] + dt * once[0] + dd * (p0[0] / 3.0 + phi[0] / 6.0),
+                twice[1] + dt * once[1] + dd * (p0[1] / 3.0 + phi[1] / 6.0),
+            )
+            self._once = (once[0] + h * (p0[0] + phi[0]), once[1] + h * (p0[1] + phi[1]))
+            self.t += dt
+        self.started = True
+        self._alpha = alpha
+        (sx, sy), (ox, oy), lag = self._twice, self._once, self.lag
+        px, py = self.regressor(alpha)
+        ex, ey = rotate(extra, -alpha)
+        lag2, lagged = lag * lag * sign, lag * lag
+        self.fit.add(
+            (
+                1.0,
+                self.t,
+                sx - lag * ox + lag2 * px + lagged * ex,
+                sy - lag * oy + lag2 * py + lagged * ey,
+            ),
+            alpha,
+        )
+        self._solve()
+
+    @property
+    def estimate(self) -> Vec2 | None:
+        """``c``: ``z_C`` at the push's first instant, in ``W`` then."""
+        fit = self._solution
+        return None if fit is None else (fit.estimate[2], fit.estimate[3])
+
+    @property
+    def covariance(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """The covariance (m²) of :attr:`estimate`."""
+        fit = self._solution
+        if fit is None:
+            return None
+        cov = fit.covariance(self._scale)
+        return ((cov[2][2], cov[2][3]), (cov[3][2], cov[3][3]))
+
+    @property
+    def std(self) -> float | None:
+        """The standard deviation (m) of :attr:`estimate` along its least certain axis."""
+        cov = self.covariance
+        if cov is None:
+            return None
+        (a, b), (_, d) = cov
+        return largest_std(a, b, d)
+
+    def com_offset(self, alpha: float) -> Vec2 | None:
+        """``z_C = R(α) c`` after a rotation ``α``."""
+        c = self.estimate
+        return None if c is None else rotate(c, alpha)

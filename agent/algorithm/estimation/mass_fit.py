@@ -1,0 +1,108 @@
+"""Step 7 under noise: ``m`` from the COM's displacement, not from its velocity.
+
+Under the team's common force ``s(t) f`` (the sign ``s = ±1`` reverses on the agreed clock to
+keep the floor bounded, :meth:`~agent.algorithm.phase_machine.PhaseMachine.push_sign`) the COM
+accelerates at ``n s f / m`` (Step 7), so from the mass fit's first instant ``t₀``
+
+    p_C(t) − p_C(t₀) = v₀ (t − t₀) + (n f / m) (S(t) − τ_d Σ(t) + τ_d² s(t)),
+    Σ(t) = ∫_{t₀}^{t} s dt,   S(t) = ∫_{t₀}^{t} Σ dt,
+
+linear in ``(v₀ₓ, v₀ᵧ, 1/m)`` with one row per axis (a force ``a(t)`` that every robot adds
+to the push, ``push_damping``'s, adds ``n ∫∫a`` to the last regressor, lagged alike);
+``τ_d`` is the drives' lag, which Step 4's fit found
+(:attr:`~agent.algorithm.estimation.inertia_fit.InertiaFit.lag`): a drive with a first-order lag
+applies ``s/(1 + τ_d p)`` (``p`` = d/dt), whose double integral is
+``S − τ_d Σ + τ_d² s/(1 + τ_d p)``; the last term's lag is left out (it only matters for a
+tick after each reversal). A robot measures the displacement without
+differentiating anything: ``p_C = p_Ci − o`` with ``o = p_Ci − p_C = z_i + z_C`` (Steps 2 and
+5), a vector of the load that turns with it, so
+
+    p_C(t) − p_C(t₀) = ∫_{t₀}^{t} ṗ_Ci dt − (I − R(θ(t₀) − θ(t))) o(t),
+
+the integral of its own velocity (trapezoid) and the current estimate of ``o`` turned back by
+the load's rotation since ``t₀``. Where eq. (7)'s ``ṗ_C = ṗ_Ci − ω o⊥`` carries ω's noise
+times the offset (centimetres per second), the displacement's error is the velocity noise's
+random walk.
+
+Uncertainty: the fit's ``σ̂² M⁻¹`` as it is, every row counted (over 40 runs of the paper's
+scenario at 1 cm/s, seeds 0–39, the rows counted one per 0.2 s gave standard deviations eight
+times the errors'); ``std(m̂) = std(1/m) m̂²``. The fit takes the
+commanded force for the applied one; the pipeline scales its ``m`` by the drives' mean gain
+(:mod:`agent.algorithm.estimation.drive_gain`).
+"""
+
+from __future__ import annotations
+
+from agent.algorithm.estimation.least_squares import ReciprocalFit
+from agent.platform.geometry import Vec2, rotate
+
+
+class MassFit(ReciprocalFit):
+    """``m`` from the COM's displacement while the team pushes with ``f`` each."""
+
+    min_rows = 20  # two rows a sample
+    correlation_time = 0.0  # each row counts: measured (below)
+
+    def __init__(self, n: int, force: Vec2, forgetting: float = 1.0, lag: float = 0.0):
+        super().__init__(3, forgetting)  # rows [t, 0, n f_x (S − τ_d Σ)], [0, t, n f_y (…)]
+        self.n = n
+        self.total_force = (n * force[0], n * force[1])
+        self._added_once: Vec2 = (0.0, 0.0)
+        self._added_twice: Vec2 = (0.0, 0.0)
+        """``∫a dt`` and ``∫∫a`` of the force ``a`` each robot added to the push."""
+        self.lag = lag
+        self.started = False
+        self._once = 0.0
+        """``Σ = ∫s dt`` since the first sample."""
+        self._twice = 0.0
+        """``S = ∫∫s`` since the first sample."""
+        self._velocity: Vec2 = (0.0, 0.0)
+        self._travel: Vec2 = (0.0, 0.0)
+        """``∫ṗ_Ci dt`` since the first sample."""
+        self._angle0 = 0.0
+
+    def update(
+        self,
+        velocity: Vec2,
+        offset: Vec2,
+        angle: float,
+        sign: float,
+        dt: float,
+        *,
+        added: Vec2 = (0.0, 0.0),
+    ) -> None:
+        """Feed the robot's contact velocity ``ṗ_Ci``, the offset ``o = p_Ci − p_C`` and the
+        load's rotation ``angle`` at the end of an interval ``dt`` of pushing with the mean
+        sign ``sign`` and the mean force ``added`` each robot added to it (the first call
+        starts)."""
+        if not self.started:
+            self.started = True
+            self._velocity, self._angle0 = velocity, angle
+            return
+        v0 = self._velocity
+        travel = self._travel
+        self._travel = (
+            travel[0] + 0.5 * dt * (v0[0] + velocity[0]),
+            travel[1] + 0.5 * dt * (v0[1] + velocity[1]),
+        )
+        self._velocity = velocity
+        self.t += dt
+        self._twice += dt * self._once + 0.5 * sign * dt * dt
+        self._once += sign * dt
+        (ox, oy), (tx, ty) = self._added_once, self._added_twice
+        self._added_twice = (
+            tx + dt * ox + 0.5 * added[0] * dt * dt,
+            ty + dt * oy + 0.5 * added[1] * dt * dt,
+        )
+        self._added_once = (ox + added[0] * dt, oy + added[1] * dt)
+        back = rotate(offset, self._angle0 - angle)
+        dx = self._travel[0] - (offset[0] - back[0])
+        dy = self._travel[1] - (offset[1] - back[1])
+        t, (fx, fy), lag = self.t, self.total_force, self.lag
+        pushed = self._twice - lag * self._once + lag * lag * sign
+        (ox, oy), (tx, ty) = self._added_once, self._added_twice
+        ax = self.n * (tx - lag * ox + lag * lag * added[0])
+        ay = self.n * (ty - lag * oy + lag * lag * added[1])
+        self.fit.add((t, 0.0, pushed * fx + ax), dx)
+        self.fit.add((0.0, t, pushed * fy + ay), dy)
+        self._solve()

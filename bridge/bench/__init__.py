@@ -1,0 +1,1 @@
+"""The CAN bridge's benchmarks (``heft bench can``)."""

@@ -1,0 +1,1 @@
+"""The dashboard's benchmark (``heft bench dashboard``)."""

@@ -1,0 +1,1 @@
+"""The simulator's benchmarks (``heft bench accuracy|zenoh|noise|changes``)."""
