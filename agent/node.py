@@ -303,17 +303,17 @@ class AgentNode:
                 self.robot,
                 k,
                 agent.pipeline.change_score,
-                agent.pipeline.tuning.change_threshold,
+                agent.config.tuning.robust.change_threshold,
             )
         self.alarmed = agent.pipeline.changed
         if agent.phase != self.last_phase or k % 100 == 0:
             if agent.phase != self.last_phase:
-                epoch = agent.epoch
+                changes = agent.load_changes
                 again = ""
-                if epoch and agent.phase == Phase.INERTIA:
-                    again = f" (epoch {epoch}: the load changed)"
-                elif agent.generation and agent.phase == Phase.EXCITE:
-                    again = f" (generation {agent.generation}: every robot is back, from Step 1)"
+                if changes and agent.phase == Phase.INERTIA:
+                    again = f" (load change {changes}: the load changed)"
+                elif agent.rejoins and agent.phase == Phase.EXCITE:
+                    again = f" (rejoin {agent.rejoins}: every robot is back, from Step 1)"
                 log.info("robot %d: tick %d: phase %s%s", self.robot, k, agent.phase.label, again)
             self.last_phase = agent.phase
             self.port.report(self.status(k))
@@ -334,7 +334,7 @@ class AgentNode:
             decode_errors=self.port.rejects.total,
             late=self.late,
             lost_neighbours=tuple(sorted(self.lost)),
-            generation=self.agent.generation,
+            rejoins=self.agent.rejoins,
         )
 
     def pump(self, timeout: float) -> None:

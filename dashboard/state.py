@@ -341,8 +341,8 @@ class TeamState:
         for i, est in sorted(robots.items()):
             row = {
                 "phase": est.phase.label,
-                "epoch": est.epoch,
-                "generation": est.generation,
+                "load_changes": est.load_changes,
+                "rejoins": est.rejoins,
                 "change_score": est.change_score,
                 "tick": est.tick,
                 "mass": est.mass,
@@ -681,8 +681,8 @@ class TeamState:
 _PAGE_ROBOT = ("phase", "tick", "segments", "alive")
 _PAGE_ROW = (
     "phase",
-    "epoch",
-    "generation",
+    "load_changes",
+    "rejoins",
     "change_score",
     "mass",
     "moment",

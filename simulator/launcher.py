@@ -223,8 +223,8 @@ class Collector:
         """How long a halted team is given to begin again before the run is over (robots that
         come back: a restarted agent, a link up again); by default only the moment it takes
         to hear who was lost."""
-        self.generation = 0
-        """The team's newest generation heard (:mod:`agent.algorithm.coordination`)."""
+        self.rejoined = 0
+        """The most rejoins heard from the team (:mod:`agent.algorithm.coordination`)."""
         self.rejoins: list[dict[str, int | None]] = []
         """Each new beginning: the tick the team halted at (``None``: its halt was not heard,
         e.g. the router was down) and the tick it began again."""
@@ -331,25 +331,25 @@ class Collector:
             if not self._finished:
                 self.lost.update(message.lost)
 
-    def _generation(self, message: Estimates | Status) -> bool:
-        """Whether ``message`` is of the team's newest generation (a newer one: the team began
-        again, and what the collector knew of the old one's progress is dropped)."""
-        if message.generation < self.generation:
+    def _current(self, message: Estimates | Status) -> bool:
+        """Whether ``message`` is of the team since its latest rejoin (after a newer one: the
+        team began again, and what the collector knew of the old one's progress is dropped)."""
+        if message.rejoins < self.rejoined:
             return False
-        if message.generation > self.generation:
+        if message.rejoins > self.rejoined:
             if message.phase != Phase.HALTED:
-                LOG.info("the team began again (generation %d)", message.generation)
+                LOG.info("the team began again (rejoin %d)", message.rejoins)
                 began = message.phase_since if isinstance(message, Estimates) else message.tick
                 self.rejoins.append({"halted": self.halted_tick, "began": began})
                 self.halted, self.halted_tick = False, None
                 self.lost.clear()
                 self.done_since.clear()
                 self.phase_ticks = {p: t for p, t in self.phase_ticks.items() if p == "halted"}
-            self.generation = message.generation
+            self.rejoined = message.rejoins
         return True
 
     def _estimate(self, est: Estimates) -> None:
-        if not self._generation(est):
+        if not self._current(est):
             return
         if est.phase == Phase.HALTED:
             self._halt(est.tick)
@@ -361,7 +361,7 @@ class Collector:
         self._complete(est.tick)
 
     def _status(self, status: Status) -> None:
-        if not self._generation(status):
+        if not self._current(status):
             return
         self.statuses[status.robot] = status
         self.lost.update(status.lost_neighbours)

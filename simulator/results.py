@@ -313,8 +313,8 @@ def load_changes(outcome: RunOutcome) -> dict[str, Any]:
     for sample in (*outcome.history, outcome.final):
         for est in sample.estimates.values():
             start = est.started.get(4)
-            if est.epoch > 0 and start is not None:
-                began[est.epoch] = min(began.get(est.epoch, start), start)
+            if est.load_changes > 0 and start is not None:
+                began[est.load_changes] = min(began.get(est.load_changes, start), start)
     restarts = [began[e] * period for e in sorted(began)]
     changes = [
         {

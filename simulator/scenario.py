@@ -838,6 +838,10 @@ def scenario_to_toml(s: Scenario) -> str:
     agent = toml_fields(s.agent, only_changed=True)
     if agent:
         lines += ["", "[agent]", *agent]
+    for family in ("paper", "robust"):
+        table = toml_fields(getattr(s.agent, family), only_changed=True)
+        if table:
+            lines += ["", f"[agent.{family}]", *table]
     for event in s.events:
         lines += ["", "[[events]]", f"at_s = {event.at_s!r}"]
         lines += [

@@ -18,22 +18,22 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
+from agent.algorithm.estimation.centroid import MAX_MASS_INFORMATION, CentroidConsensus, mass_input
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.algorithm.estimation.angular_velocity import angular_velocity
-from agent.algorithm.estimation.centroid import MAX_MASS_INFORMATION, CentroidConsensus, mass_input
 from agent.algorithm.estimation.com_observer import ComObserver
-from agent.algorithm.estimation.com_regression import ComRegression
 from agent.algorithm.estimation.com_velocity import com_velocity
 from agent.algorithm.estimation.consensus import metropolis_weight
 from agent.algorithm.estimation.estimator import Estimator
 from agent.algorithm.estimation.excitation import kick_force, spin_up_force
-from agent.algorithm.estimation.filtered_regression import FilteredRegression
 from agent.algorithm.estimation.inertia import InertiaEstimator, inertia_force
-from agent.algorithm.estimation.mass import MassEstimator
-from agent.algorithm.estimation.relative_position import RelativePosition
 from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
+from agent.algorithm.paper.com_regression import ComRegression
+from agent.algorithm.paper.filtered_regression import FilteredRegression
+from agent.algorithm.paper.mass import MassEstimator
+from agent.algorithm.paper.relative_position import RelativePosition
 from agent.algorithm.safety import saturate
 from agent.platform.geometry import angle_between, arc_factor, cross, rotate
 from agent.platform.protocol import Share

@@ -11,7 +11,7 @@ import tomllib
 import pytest
 
 from agent.algorithm.coordination import PhaseBarrier
-from agent.algorithm.estimation.load_change import ProbeFit
+from agent.algorithm.robust.load_change import ProbeFit
 from agent.platform.protocol import Phase, Share, decode, encode
 from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState

@@ -10,16 +10,16 @@ import math
 import numpy as np
 import pytest
 
-from agent.algorithm.estimation.arc_fit import ArcRelativePosition
-from agent.algorithm.estimation.com_fit import ComFit
-from agent.algorithm.estimation.drive_gain import DriveGain
 from agent.algorithm.estimation.estimator import Estimator
-from agent.algorithm.estimation.inertia_fit import InertiaFit
-from agent.algorithm.estimation.least_squares import LeastSquares
-from agent.algorithm.estimation.mass_fit import MassFit
-from agent.algorithm.estimation.relative_position import RelativePosition
 from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
+from agent.algorithm.paper.relative_position import RelativePosition
 from agent.algorithm.phase_machine import PhaseMachine
+from agent.algorithm.robust.arc_fit import ArcRelativePosition
+from agent.algorithm.robust.com_fit import ComFit
+from agent.algorithm.robust.drive_gain import DriveGain
+from agent.algorithm.robust.inertia_fit import InertiaFit
+from agent.algorithm.robust.least_squares import LeastSquares
+from agent.algorithm.robust.mass_fit import MassFit
 from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
 from agent.platform.config import ConfigError, from_table, to_toml
 from agent.platform.geometry import rotate

@@ -10,7 +10,7 @@ import statistics
 
 import pytest
 
-from agent.algorithm.estimation.rotation import (
+from agent.algorithm.robust.rotation import (
     RotationConsensus,
     delay_factor,
     own_turn,

@@ -12,11 +12,15 @@ It is made of three parts, run in this order each tick ``k``:
 - the :class:`~agent.algorithm.inbox.Inbox` takes in the sample and the messages, and says up
   to which *estimation instant* the robot can estimate (``k − 1`` unless messages are late:
   the timing is explained there);
-- the :class:`~agent.algorithm.pipeline.EstimationPipeline` runs Steps 1–7 at each instant up to it;
-- the :class:`~agent.algorithm.phase_machine.PhaseMachine` agrees with the team on the phase (force
-  regime; the phases are explained there) and gives the force for ``[t_k, t_{k+1})``.
+- the :class:`~agent.algorithm.pipeline.EstimationPipeline` runs Steps 1–7 at each instant up
+  to it;
+- the :class:`~agent.algorithm.phase_machine.PhaseMachine` agrees with the team on the phase
+  (force regime; the phases are explained there) and gives the force for ``[t_k, t_{k+1})``.
 
-A halted team that has every robot back begins again (a new *generation*, see
+The pipeline and the phase machine are those of the family of estimators the tuning names
+(:mod:`agent.algorithm.families`), chosen once, here.
+
+A halted team that has every robot back begins again (a *rejoin*, see
 :mod:`agent.algorithm.coordination`): at the agreed tick ``k_0`` the robot drops its inbox,
 estimates and phases and starts them afresh, as if the run began at ``k_0``. Inside, its parts count
 ticks from ``k_0`` (:attr:`Agent.origin`); every message in or out carries the run's own
@@ -28,10 +32,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterable
 
-from agent.algorithm.estimation.rotation import wrapped
+from agent.algorithm.families import FAMILIES
 from agent.algorithm.inbox import HISTORY_TICKS, Inbox
 from agent.algorithm.phase_machine import PhaseMachine
-from agent.algorithm.pipeline import EstimationPipeline
 from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2
 from agent.platform.protocol import Command, Estimates, Measurement, Phase, Share
@@ -45,17 +48,19 @@ class Agent:
         self.robot = config.robot
         self.n = config.n
         self.neighbours = tuple(sorted(config.neighbours))
+        self.family = FAMILIES[config.tuning.estimator]
+        """The family of estimators this agent runs."""
         self.origin = 0
-        """The run's tick at which this generation began: the parts' tick 0."""
+        """The run's tick at which the team last began (its last rejoin): the parts' tick 0."""
         self.team_back = False
         """Whether every neighbour is alive (the process says): a halted robot is then ready
         to begin again."""
-        self._begin(PhaseMachine(config))
+        self._begin(self.family.phases(config))
 
     def _begin(self, phase_machine: PhaseMachine) -> None:
-        """Fresh parts (the phase machine given, with its barrier's generation)."""
+        """Fresh parts (the phase machine given, with its barrier's rejoins)."""
         self.inbox = Inbox(self.neighbours)
-        self.pipeline = EstimationPipeline(self.config, self.neighbours)
+        self.pipeline = self.family.pipeline(self.config, self.neighbours)
         self.phase_machine = phase_machine
         self._commanded: Vec2 | None = None
         """The force commanded at the last tick."""
@@ -65,14 +70,14 @@ class Agent:
         return self.phase_machine.barrier.phase
 
     @property
-    def epoch(self) -> int:
+    def load_changes(self) -> int:
         """How many times the team has restarted for a changed load."""
-        return self.phase_machine.barrier.epoch
+        return self.phase_machine.barrier.load_changes
 
     @property
-    def generation(self) -> int:
+    def rejoins(self) -> int:
         """How many times the team has begun again after a halt."""
-        return self.phase_machine.barrier.generation
+        return self.phase_machine.barrier.rejoins
 
     @property
     def instant(self) -> int:
@@ -88,74 +93,59 @@ class Agent:
 
     def step(self, measurement: Measurement, shares: Iterable[Share]) -> tuple[Command, Share]:
         """One sensor tick: returns the force command for this tick and the share to send."""
-        generation = self.generation
+        rejoins = self.rejoins
         mine, others = [], []
         for share in shares:
             share = self._local(share)
             if share is None:
                 continue
-            (mine if share.generation == generation else others).append(share)
+            (mine if share.barrier.rejoins == rejoins else others).append(share)
         if self.origin:
             measurement = dataclasses.replace(measurement, tick=measurement.tick - self.origin)
         command, share = self._step(measurement, mine, others)
-        if self.generation != generation and self.phase == Phase.EXCITE:
+        if self.rejoins != rejoins and self.phase == Phase.EXCITE:
             # The team begins again at this tick (or began a few ticks ago, and this robot
             # catches up): afresh, from the same barrier.
             self.origin += measurement.tick
-            self._begin(PhaseMachine(self.config, self.phase_machine.barrier))
+            self._begin(self.family.phases(self.config, self.phase_machine.barrier))
             local = dataclasses.replace(measurement, tick=0)
             command, share = self._step(local, [], [])
-        elif self.generation != generation and self.phase != Phase.HALTED:
-            # A generation already past Step 1–3: this robot has not their estimates. It
-            # halts that generation, and the team begins again with it.
+        elif self.rejoins != rejoins and self.phase != Phase.HALTED:
+            # A rejoined team already past Steps 1–3: this robot has not their estimates. It
+            # halts the team, and the team begins again with it.
             self.phase_machine.halt(measurement.tick)
-            barrier = self.phase_machine.barrier
             command = dataclasses.replace(command, force=(0.0, 0.0))
-            share = dataclasses.replace(
-                share, phase=barrier.phase, ready=barrier.ready, switch_at=barrier.switch_at
-            )
+            share = dataclasses.replace(share, barrier=self.phase_machine.barrier.state)
         return self._run_command(command), self._run_share(share)
 
     def _step(
         self, measurement: Measurement, shares: list[Share], others: list[Share]
     ) -> tuple[Command, Share]:
-        """:meth:`step` in the parts' ticks; ``others``: shares of other generations, for the
+        """:meth:`step` in the parts' ticks; ``others``: shares of other rejoins, for the
         barrier only."""
         k = measurement.tick
         inbox, pipeline, phases = self.inbox, self.pipeline, self.phase_machine
         if self._commanded is not None:  # the force measured now was applied since the last tick
-            pipeline.drive_gain(self._commanded, measurement.force)
+            pipeline.applied(self._commanded, measurement.force)
         newest = inbox.receive(measurement, shares)
         for e in range(pipeline.instant + 1, newest + 1):
             pipeline.estimate_at(e, inbox, phases)
         phases.team_back = self.team_back
-        if phases.step(k, pipeline, [*inbox.latest.values(), *others]):
+        views = [s.barrier for s in inbox.latest.values()] + [s.barrier for s in others]
+        if phases.step(k, pipeline, views):
             pipeline.enter(phases.phase, k, phases)
         force = phases.force(k, pipeline, measurement.velocity)
         self._commanded = force
         consensus = pipeline.consensus
-        barrier = phases.barrier
         share = Share(
             sender=self.robot,
             tick=k,
             velocity=measurement.velocity,
             degree=consensus.degree,
-            centroid=consensus.centroid,
-            spread=consensus.spread,
-            phase=barrier.phase,
-            ready=barrier.ready,
-            switch_at=barrier.switch_at,
-            flows=consensus.shared_flows(),
             instant=pipeline.instant,
-            gain=consensus.gain,
-            gain_centroid=consensus.gain_centroid,
-            gain_spread=consensus.gain_spread,
-            epoch=barrier.epoch,
-            generation=barrier.generation,
-            rotation=wrapped(pipeline.angle),
-            rotation_variance=pipeline.rotation.variance,
-            mass_information=consensus.mass_information,
-            mass_weighted=consensus.mass_weighted,
+            barrier=phases.barrier.state,
+            team=pipeline.team_state(),
+            flows=consensus.shared_flows(),
         )
         before = k - HISTORY_TICKS
         inbox.forget(before)
@@ -179,7 +169,7 @@ class Agent:
             phase_since=est.phase_since + o,
             started={step: t + o for step, t in est.started.items()},
             settled={step: t + o for step, t in est.settled.items()},
-            generation=self.generation,
+            rejoins=self.rejoins,
         )
 
     # ---------------------------------------------------------------- the run's ticks
@@ -190,10 +180,13 @@ class Agent:
             return share
         if share.tick < o:
             return None
+        switch_at = share.barrier.switch_at
         return dataclasses.replace(
             share,
             tick=share.tick - o,
-            switch_at=share.switch_at - o if share.switch_at >= o else -1,
+            barrier=dataclasses.replace(
+                share.barrier, switch_at=switch_at - o if switch_at >= o else -1
+            ),
             instant=share.instant - o if share.instant >= o else -1,
         )
 
@@ -206,9 +199,12 @@ class Agent:
         o = self.origin
         if not o:
             return share
+        switch_at = share.barrier.switch_at
         return dataclasses.replace(
             share,
             tick=share.tick + o,
-            switch_at=share.switch_at + o if share.switch_at >= 0 else -1,
+            barrier=dataclasses.replace(
+                share.barrier, switch_at=switch_at + o if switch_at >= 0 else -1
+            ),
             instant=share.instant + o if share.instant >= 0 else -1,
         )

@@ -15,26 +15,27 @@ then makes the switch simultaneous:
 
 Once the team is ``done`` it watches the load (robust estimators): a robot whose probes say the
 load has changed is ready to *restart*, and one robot is enough — it proposes the restart as
-above, and at the agreed tick every robot begins a new *epoch* in the ``inertia`` phase (Steps
-4–7 again; the contacts' geometry, Steps 1–3, holds for the changed load). Phases compare by
-epoch first: a robot that hears a neighbour in a later epoch catches up with it.
+above, and at the agreed tick every robot counts one more *load change* and begins the
+``inertia`` phase again (Steps 4–7; the contacts' geometry, Steps 1–3, holds for the changed
+load). Phases compare by load changes first: a robot that hears a neighbour after more load
+changes catches up with it.
 
 A halted team begins again once every robot is back (:mod:`agent.node` says when a robot's
 neighbours are all alive again): in ``halted`` a robot is ready when it has every neighbour,
-all ``n`` must be, and at the agreed tick every robot begins a new *generation* from Step 1
-(``excite``, epoch 0), with everything it had estimated dropped
-(:class:`agent.algorithm.agent.Agent` starts afresh). Generations come before everything else: a
-robot that hears a later one catches up with it, as with a later phase (it missed the agreed tick:
-in real time a proposal crosses the graph more slowly than one hop a tick; or it is a new process of
-a robot that was lost, joining the halted team); a neighbour's message of an earlier
-generation is ignored.
+all ``n`` must be, and at the agreed tick every robot counts one more *rejoin* and begins again
+from Step 1 (``excite``, no load change), with everything it had estimated dropped
+(:class:`agent.algorithm.agent.Agent` starts afresh). Rejoins come before everything else: a
+robot that hears of more rejoins catches up with them, as with a later phase (it missed the
+agreed tick: in real time a proposal crosses the graph more slowly than one hop a tick; or it is
+a new process of a robot that was lost, joining the halted team); a neighbour's message of fewer
+rejoins is ignored.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
-from agent.platform.protocol import Phase, Share
+from agent.platform.protocol import Barrier, Phase
 
 
 class PhaseBarrier:
@@ -51,48 +52,58 @@ class PhaseBarrier:
         ``i − 1``)."""
         self.switch_at = -1
         """The agreed tick of the switch to the next phase (``-1`` while none is agreed)."""
-        self.epoch = 0
+        self.load_changes = 0
         """How many times the team has restarted for a changed load."""
-        self.generation = 0
+        self.rejoins = 0
         """How many times the team has begun again after a halt."""
 
-    def _enter(self, phase: int, epoch: int) -> None:
+    @property
+    def state(self) -> Barrier:
+        """This view, as shared."""
+        return Barrier(self.phase, self.ready, self.switch_at, self.load_changes, self.rejoins)
+
+    def _enter(self, phase: int, load_changes: int) -> None:
         self.phase = Phase(phase)
-        self.epoch = epoch
+        self.load_changes = load_changes
         self.ready = 0
         self.switch_at = -1
 
     def halt(self) -> None:
         """Jump to ``halted`` at once; neighbours catch up with it."""
-        self._enter(Phase.HALTED, self.epoch)
+        self._enter(Phase.HALTED, self.load_changes)
 
     @staticmethod
-    def _order(generation: int, phase: Phase, epoch: int) -> tuple[int, bool, int, int]:
-        """Which of two team states is later: by generation, then ``halted`` last, then by
-        epoch, then phase."""
-        return (generation, phase == Phase.HALTED, epoch, phase)
+    def _order(rejoins: int, phase: Phase, load_changes: int) -> tuple[int, bool, int, int]:
+        """Which of two team states is later: by rejoins, then ``halted`` last, then by load
+        changes, then phase."""
+        return (rejoins, phase == Phase.HALTED, load_changes, phase)
 
-    def step(self, tick: int, own_ready: bool, shares: Iterable[Share]) -> bool:
+    def step(self, tick: int, own_ready: bool, barriers: Iterable[Barrier]) -> bool:
         """Merge the neighbours' views and our readiness; returns ``True`` if the phase
-        (or epoch, or generation) changed at this tick (the new one applies from ``tick`` on)."""
-        start = (self.phase, self.epoch, self.generation)
+        (or the load changes, or the rejoins) changed at this tick (the new one applies from
+        ``tick`` on)."""
+        start = (self.phase, self.load_changes, self.rejoins)
         order = self._order
-        shares = [s for s in shares if s.generation >= self.generation]
-        latest = max(shares, key=lambda s: order(s.generation, s.phase, s.epoch), default=None)
-        if latest is not None and order(latest.generation, latest.phase, latest.epoch) > order(
-            self.generation, self.phase, self.epoch
+        views = [b for b in barriers if b.rejoins >= self.rejoins]
+        latest = max(views, key=lambda b: order(b.rejoins, b.phase, b.load_changes), default=None)
+        if latest is not None and order(latest.rejoins, latest.phase, latest.load_changes) > order(
+            self.rejoins, self.phase, self.load_changes
         ):
-            self.generation = latest.generation
-            self._enter(latest.phase, latest.epoch)
+            self.rejoins = latest.rejoins
+            self._enter(latest.phase, latest.load_changes)
         latest_proposal = tick + self.n + self.margin  # no robot can have proposed later
-        for s in shares:
-            if (s.phase, s.epoch, s.generation) == (self.phase, self.epoch, self.generation):
-                self.ready |= s.ready & self.all_ready  # bits of robots not in the team: none
-                if 0 <= s.switch_at <= latest_proposal and (
-                    self.switch_at < 0 or s.switch_at < self.switch_at
+        for b in views:
+            if (b.phase, b.load_changes, b.rejoins) == (
+                self.phase,
+                self.load_changes,
+                self.rejoins,
+            ):
+                self.ready |= b.ready & self.all_ready  # bits of robots not in the team: none
+                if 0 <= b.switch_at <= latest_proposal and (
+                    self.switch_at < 0 or b.switch_at < self.switch_at
                 ):
-                    self.switch_at = s.switch_at
-        if own_ready and (self.phase, self.epoch, self.generation) == start:
+                    self.switch_at = b.switch_at
+        if own_ready and (self.phase, self.load_changes, self.rejoins) == start:
             self.ready |= 1 << (self.robot - 1)
         # Leaving a phase takes every robot; restarting for a changed load, any one.
         enough = self.ready != 0 if self.phase == Phase.DONE else self.ready == self.all_ready
@@ -100,10 +111,10 @@ class PhaseBarrier:
             self.switch_at = tick + self.n + self.margin
         if 0 <= self.switch_at <= tick:
             if self.phase == Phase.DONE:
-                self._enter(Phase.INERTIA, self.epoch + 1)
+                self._enter(Phase.INERTIA, self.load_changes + 1)
             elif self.phase == Phase.HALTED:
-                self.generation += 1
+                self.rejoins += 1
                 self._enter(Phase.EXCITE, 0)
             else:
-                self._enter(self.phase + 1, self.epoch)
-        return (self.phase, self.epoch, self.generation) != start
+                self._enter(self.phase + 1, self.load_changes)
+        return (self.phase, self.load_changes, self.rejoins) != start

@@ -76,9 +76,14 @@ class Inbox:
 def usable(share: Share, tick: int) -> bool:
     """A share whose numbers an agent can use at ``tick``: finite, and not stamped so far
     ahead that it could only come from a clock gone wrong."""
+    if share.tick >= tick + HISTORY_TICKS:
+        return False
     vx, vy = share.velocity
-    c = share.centroid or (0.0, 0.0)
+    total = vx - vx + vy - vy
     # x - x == 0 exactly for every finite float, and is NaN for NaN and ±inf.
-    return vx - vx + vy - vy + c[0] - c[0] + c[1] - c[1] + share.spread - share.spread == 0.0 and (
-        share.tick < tick + HISTORY_TICKS
-    )
+    for value in share.team:
+        if type(value) is tuple:
+            total += value[0] - value[0] + value[1] - value[1]
+        else:
+            total += value - value
+    return total == 0.0

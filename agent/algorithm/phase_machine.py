@@ -10,25 +10,21 @@ excite    kick, then geometry-free spin-up        Step 1 ``z_ij``, Step 2 ``z_i`
           and damping
 inertia   ``f_i = ±k z_i⊥`` (eq. 14)                Step 4 ``J``
 push      common ``±f`` (eq. 17)                  Step 5 ``z_C``, Step 6 ``ṗ_C``, Step 7 ``m``
-done      damping: the load comes to rest, or     (tracking goes on; with ``robust``, the
-          (``robust``) probes and damping         probes test the load for a change)
+done      damping: the load comes to rest, or     (tracking goes on; the robust family's
+          (robust) probes and damping             probes test the load for a change)
 halted    zero                                    (a robot was lost: the team stops until
                                                   every robot is back, then begins again)
 ======== ======================================= ===========================================
-
-A changed load (``robust``): a robot whose probe finds the load no longer the one estimated
-(:mod:`agent.algorithm.estimation.load_change`) is ready to leave ``done``, and the team restarts at
-``inertia`` in a new epoch at an agreed tick (:mod:`agent.algorithm.coordination`).
 
 ``halted`` is entered by :meth:`PhaseMachine.halt` when a neighbour is lost, and reaches the
 rest of the team through the barrier's catch-up rule (it is the highest phase). The paper
 assumes ``n`` robots that all push; estimates made without one of them would be wrong, so the
 team stops and says so rather than carrying on. A halted robot is ready to leave ``halted``
 once every neighbour is alive again (:attr:`PhaseMachine.team_back`); when all are, the team
-begins again from Step 1 in a new generation (:mod:`agent.algorithm.coordination`,
+begins again from Step 1 (a rejoin, :mod:`agent.algorithm.coordination`,
 :mod:`agent.algorithm.agent`).
 
-The force laws:
+The force laws every family shares:
 
 - *excite*: for ``kick_duration_s`` a seeded random kick, then the spin-up
   ``f_i = k Σ_j (1 − ‖ż_ij‖/v*) ż_ij`` (:mod:`agent.algorithm.estimation.excitation`) plus the
@@ -36,90 +32,43 @@ The force laws:
   need the load to turn, not to travel;
 - *inertia*: ``f_i = ±k z_i⊥`` with ``k = F/√w`` (eq. 14,
   :mod:`agent.algorithm.estimation.inertia`): the torque ``±k w`` speeds the turn the load
-  already has up until ``|ω|`` reaches ``inertia_max_omega``, then brakes it down to half of
-  that, and so on. ``ω`` at the tick is predicted from its last measurement, the torque applied since and ``Ĵ``: without noise every
-  robot predicts the same value, so they all reverse at the same tick. With ``estimator =
-  "robust"`` the robots' ω differ by their noise, so the torque instead speeds up for
-  ``inertia_flip_s`` and brakes for as long, in turn, from the agreed tick on (after braking
-  first for ``inertia_brake_s``: with half a flip, ω swings about the turn the load had, by
-  half of what speeding up first adds to it, which keeps a compact, light load's turn on its
-  floor);
-- *push*: the common force ``f = max(f̄_y Ĵ/n, push_min_force)`` along ``push_direction``, at
-  most ``max_force`` (eq. 17 and Sec. VI, ``f_y = J/n`` for ``f̄_y = 1``); with ``estimator =
-  "robust"`` the configured ``push_force``, the same for every robot whatever its Ĵ. The paper
-  pushes one way, and the load's speed grows without bound; on a bounded floor the push
-  reverses on the agreed clock (``push_flip_s = T``): ``+f`` for ``T/2``, then ``−f`` and
-  ``+f`` for ``T`` each, in turn (:meth:`PhaseMachine.push_sign`), so that the COM's velocity
-  swings about the one it had and it travels back and forth; with ``push_damping = b`` each
-  robust robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity (which every robot
-  estimates alike), so that a light load's speed stays within about ``f/b`` and a heavy one's
-  drift dies out (Steps 5 and 7 take the force as commanded);
-- *done*: the damping ``−b ṗ_Ci`` alone brings the load to rest. With ``estimator =
-  "robust"`` (and ``change_threshold`` > 0) the team keeps watching the load instead, in cycles
-  on the agreed clock: a gap of ``monitor_gap_s`` in which each robot damps the COM's velocity,
-  ``−b ṗ̂_C`` (Step 6's estimate: the load keeps its turn, which Step 5's fit needs, and loses
-  its drift), then a *probe* of ``probe_s = T``, the push's common force ``+f`` for ``T/4``,
-  ``−f`` for ``T/2`` and ``+f`` for ``T/4``: the COM's velocity and place come back to where
-  they were, after a swing of ``n f T²/16m``; every other probe swings the other way.
+  already has up and brakes it, in turn, as the family decides
+  (:meth:`PhaseMachine._inertia_direction`);
+- *push*: a common force ``f`` along ``push_direction`` whose size the family gives
+  (:meth:`PhaseMachine._push_magnitude`), at most ``max_force``. The paper pushes one way, and
+  the load's speed grows without bound; on a bounded floor the push reverses on the agreed
+  clock (``push_flip_s = T``): ``+f`` for ``T/2``, then ``−f`` and ``+f`` for ``T`` each, in
+  turn (:meth:`PhaseMachine.push_sign`), so that the COM's velocity swings about the one it had
+  and it travels back and forth;
+- *done*: the damping ``−b ṗ_Ci`` alone brings the load to rest (a family may watch the load
+  instead: :meth:`PhaseMachine._done_laws`).
 
-Every command is bounded by ``max_force`` (:func:`agent.algorithm.safety.saturate`).
+Every command is bounded by ``max_force`` (:func:`agent.algorithm.safety.saturate`). The
+families' machines: :class:`agent.algorithm.paper.phases.PaperPhases`,
+:class:`agent.algorithm.robust.phases.RobustPhases`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Protocol
 
 from agent.algorithm.coordination import PhaseBarrier
 from agent.algorithm.estimation.excitation import kick_force, spin_up_force
 from agent.algorithm.estimation.inertia import inertia_force
+from agent.algorithm.interfaces import OwnEstimates
 from agent.algorithm.safety import saturate
-from agent.algorithm.tuning import AgentConfig, Estimators
+from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2, rotate
-from agent.platform.protocol import Phase, Share
+from agent.platform.protocol import Barrier, Phase
 
-if TYPE_CHECKING:
-    from agent.algorithm.estimation.settling import SettleDetectors
-
-
-class OwnEstimates(Protocol):
-    """What the phase machine reads of its own robot's estimates (an
-    :class:`~agent.algorithm.pipeline.EstimationPipeline`)."""
-
-    instant: int
-    """The estimation instant."""
-    omega: float | None
-    """``ω`` at the estimation instant (Step 3)."""
-    measured: int | None
-    """The last instant whose ``ω`` was measured."""
-    zdot: dict[int, Vec2]
-    """``ż_ij`` at the estimation instant, by neighbour."""
-    settle: SettleDetectors
-
-    com_velocity: Vec2 | None
-    """``ṗ_C`` (Step 6)."""
-    changed: bool
-    """Whether a probe found the load changed (:mod:`agent.algorithm.estimation.load_change`)."""
-
-    @property
-    def centroid(self) -> Vec2:
-        """``z_i`` at the estimation instant (Step 2)."""
-        ...
-
-    @property
-    def spread(self) -> float:
-        """``w / n`` (eq. 16)."""
-        ...
-
-    @property
-    def moment(self) -> float | None:
-        """``Ĵ`` (Step 4)."""
-        ...
+Ready = Callable[[int, OwnEstimates], bool]
+Law = Callable[[int, OwnEstimates, Vec2], Vec2]
 
 
 class PhaseMachine:
-    """One robot's phase, when it was entered, and the force law of each phase."""
+    """One robot's phase, when it was entered, and the force law of each phase (the part every
+    family shares; a family overrides the hooks at the end)."""
 
     def __init__(self, config: AgentConfig, barrier: PhaseBarrier | None = None):
         tuning = config.tuning
@@ -127,7 +76,7 @@ class PhaseMachine:
         self.n = config.n
         self.dt = config.period_s
         self.barrier = barrier or PhaseBarrier(config.robot, config.n, tuning.switch_margin_ticks)
-        """The team's phase (a new generation's machine takes over the barrier that began it)."""
+        """The team's phase (a rejoin's machine takes over the barrier that began it)."""
         self.team_back = False
         """Whether every neighbour is alive: in ``halted``, this robot is then ready."""
         self.entered: dict[Phase, int] = {Phase.EXCITE: 0}
@@ -135,9 +84,6 @@ class PhaseMachine:
         self.kick_ticks = round(tuning.kick_duration_s / self.dt)
         self.kick = kick_force(config.seed, config.robot, tuning.kick_force)
         self.inertia_min_ticks = round(tuning.inertia_min_s / self.dt)
-        self.robust = tuning.estimator == Estimators.ROBUST
-        self.flip_ticks = round(tuning.inertia_flip_s / self.dt)
-        self.brake_ticks = round(tuning.inertia_brake_s / self.dt)
         self.spin_sign = 0.0
         """``sign(ω)`` when the inertia phase began: the torque first speeds that turn up."""
         self.inertia_gain = 0.0
@@ -149,21 +95,14 @@ class PhaseMachine:
         self._torque: dict[int, float] = {}
         """The team's torque (``±k w``) during each tick of the inertia phase."""
         self._damping: dict[int, Vec2] = {}
-        """What this robot added to the common push during each tick (``push_damping``)."""
+        """What this robot added to the common push during each tick (robust ``push_damping``)."""
         self.moment_used: float | None = None
         """The ``Ĵ`` the push force was sized with (Steps 5 and 7 use it too)."""
         self.push: Vec2 = (0.0, 0.0)
         """The common force ``f`` of the push phase (eq. 17), before its sign."""
         self.push_flip_ticks = round(tuning.push_flip_s / self.dt)
-        self.monitoring = self.robust and tuning.change_threshold > 0.0
-        """Whether the team probes the load once done (see the module docstring)."""
-        self.probe_ticks = 4 * max(1, round(tuning.probe_s / (4 * self.dt)))
-        """A probe's length: a multiple of 4 ticks."""
-        self.gap_ticks = max(1, round(tuning.monitor_gap_s / self.dt))
-        self.monitor_ticks = self.gap_ticks + self.probe_ticks
-        """A monitoring cycle: the gap, then a probe."""
-        self._ready: Callable[[int, OwnEstimates], bool]
-        self._law: Callable[[int, OwnEstimates, Vec2], Vec2]
+        self._ready: Ready
+        self._law: Law
         self._begin(Phase.EXCITE)
 
     @property
@@ -171,14 +110,18 @@ class PhaseMachine:
         return self.barrier.phase
 
     @property
-    def epoch(self) -> int:
+    def load_changes(self) -> int:
         """How many times the team has restarted for a changed load."""
-        return self.barrier.epoch
+        return self.barrier.load_changes
 
     @property
     def since(self) -> int:
         """The tick at which the current phase was entered."""
         return self.entered[self.barrier.phase]
+
+    def began(self, phase: Phase) -> int | None:
+        """The tick at which ``phase`` was entered (``None``: not entered)."""
+        return self.entered.get(phase)
 
     def phase_at(self, tick: int) -> Phase:
         """The phase during tick ``tick`` (as far as this robot knows)."""
@@ -194,11 +137,11 @@ class PhaseMachine:
         have settled (and the phase has lasted long enough)."""
         return self._ready(k, own)
 
-    def step(self, k: int, own: OwnEstimates, shares: Iterable[Share]) -> bool:
+    def step(self, k: int, own: OwnEstimates, barriers: Iterable[Barrier]) -> bool:
         """Tick ``k`` of the barrier, on this robot's readiness and its neighbours' latest
-        messages; returns ``True`` if a new phase begins at ``k`` (its force law is then set
+        views of it; returns ``True`` if a new phase begins at ``k`` (its force law is then set
         up from ``own``)."""
-        if not self.barrier.step(k, self._ready(k, own), shares):
+        if not self.barrier.step(k, self._ready(k, own), barriers):
             return False
         phase = self.barrier.phase
         if not self._can_enter(phase, own):
@@ -206,22 +149,18 @@ class PhaseMachine:
             # only push wrongly, so it stops the team instead.
             self.halt(k)
             return True
-        if phase == Phase.INERTIA:  # (again, in a new epoch: the later phases are to come)
+        if phase == Phase.INERTIA:  # (again, after a load change: the later phases are to come)
             self.entered = {p: t for p, t in self.entered.items() if p < Phase.INERTIA}
         self.entered[phase] = k
         if phase == Phase.INERTIA:
-            w = self.n * own.spread
+            w = self.n * own.mean_square_offset
             self.inertia_gain = self.tuning.inertia_force / math.sqrt(w)
             self.spin_sign = math.copysign(1.0, own.omega or 1.0)
             self.inertia_torque = self.spin_sign * self.inertia_gain * w
         elif phase == Phase.PUSH:
             self.moment_used = own.moment
-            t = self.tuning
-            if self.robust:
-                magnitude = t.push_force
-            else:
-                magnitude = max(t.push_fbar * self.moment_used / self.n, t.push_min_force)
-            self.push = _unit(t.push_direction, min(magnitude, t.max_force))
+            magnitude = self._push_magnitude(self.moment_used)
+            self.push = _unit(self.tuning.push_direction, min(magnitude, self.tuning.max_force))
         self._begin(phase)
         return True
 
@@ -230,7 +169,7 @@ class PhaseMachine:
         """Whether ``own`` has what ``phase``'s force law needs: ``w > 0`` for the inertia
         phase (eq. 14), ``Ĵ`` for the push (eq. 17)."""
         if phase == Phase.INERTIA:
-            return own.spread > 0.0
+            return own.mean_square_offset > 0.0
         if phase == Phase.PUSH:
             return own.moment is not None
         return True
@@ -253,9 +192,7 @@ class PhaseMachine:
             Phase.EXCITE: (self._excite_ready, self._excite_force),
             Phase.INERTIA: (self._inertia_ready, self._inertia_force),
             Phase.PUSH: (self._push_ready, self._push_force),
-            Phase.DONE: (self._changed, self._monitor_force)
-            if self.monitoring
-            else (_never_ready, self._brake_force),
+            Phase.DONE: self._done_laws(),
             Phase.HALTED: (self._back, _no_force),
         }
         self._ready, self._law = laws.get(phase, (_never_ready, _no_force))
@@ -265,14 +202,7 @@ class PhaseMachine:
         return self.team_back
 
     def _excite_ready(self, k: int, own: OwnEstimates) -> bool:
-        s = own.settle
-        return (
-            k >= self.kick_ticks
-            and s.distances.settled
-            and s.centroid.settled
-            and s.spread.settled
-            and own.spread > 0.0
-        )
+        return k >= self.kick_ticks and own.settled(Phase.EXCITE) and own.mean_square_offset > 0.0
 
     def _excite_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         """The kick, then the spin-up and the damping."""
@@ -289,24 +219,11 @@ class PhaseMachine:
         return (-b * velocity[0], -b * velocity[1])
 
     def _inertia_ready(self, k: int, own: OwnEstimates) -> bool:
-        return own.settle.moment.settled and k - self.since >= self.inertia_min_ticks
+        return own.settled(Phase.INERTIA) and k - self.since >= self.inertia_min_ticks
 
     def _inertia_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         """Eq. (14) with the torque's sign for tick ``k`` (records the team's torque)."""
-        if self.robust:
-            # Speed up, then brake as long (after braking for inertia_brake_s), from the
-            # agreed tick on: every robot takes the same decisions whatever the noise on its ω.
-            since = k - self.since - self.brake_ticks
-            flips = since // max(1, self.flip_ticks)
-            self.direction = 1.0 if since >= 0 and flips % 2 == 0 else -1.0
-        else:
-            # Speed the turn up until |ω| reaches the limit, then brake down to half of it.
-            speed = abs(self.omega_at(k, own))
-            limit = self.tuning.inertia_max_omega
-            if speed >= limit:
-                self.direction = -1.0
-            elif speed <= 0.5 * limit:
-                self.direction = 1.0
+        self.direction = self._inertia_direction(k, own)
         self._torque[k] = self.direction * self.inertia_torque
         # z_i turned to the middle of [t_k, t_k+1): the torque then averages ±k w.
         lead = (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
@@ -314,77 +231,27 @@ class PhaseMachine:
         return inertia_force(self.direction * self.spin_sign * self.inertia_gain, z)
 
     def _push_ready(self, k: int, own: OwnEstimates) -> bool:
-        s = own.settle
-        return s.com_offset.settled and s.mass.settled
+        return own.settled(Phase.PUSH)
 
     def _push_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         sign = self.push_sign(k)
-        push = (sign * self.push[0], sign * self.push[1])
-        b = self.tuning.push_damping
-        if not (self.robust and b > 0.0):
-            return push
-        # ṗ_G = ṗ_Ci − ω Q z_i, z_i turned to t_k from the estimation instant.
-        omega = own.omega or 0.0
-        z = rotate(own.centroid, omega * (k - own.instant) * self.dt)
-        centroid_velocity = (velocity[0] + omega * z[1], velocity[1] - omega * z[0])
-        force = saturate(
-            (push[0] - b * centroid_velocity[0], push[1] - b * centroid_velocity[1]),
-            self.tuning.max_force,
-        )
-        self._damping[k] = (force[0] - push[0], force[1] - push[1])
-        return force
-
-    @staticmethod
-    def _changed(k: int, own: OwnEstimates) -> bool:
-        return own.changed
-
-    def probe_start(self, tick: int) -> int | None:
-        """The first tick of the last probe begun by tick ``tick`` (``None`` while the team is
-        not done, not probing, or in the gap before the first probe)."""
-        done = self.entered.get(Phase.DONE)
-        if not self.monitoring or done is None or tick < done + self.gap_ticks:
-            return None
-        since = tick - done - self.gap_ticks
-        return tick - since % self.monitor_ticks
-
-    def probe_sign(self, tick: int) -> float:
-        """The common force's sign during tick ``tick`` of a probe: ``+`` for ``T/4``, ``−``
-        for ``T/2``, ``+`` for ``T/4`` (``T`` = ``probe_s``), every other probe the other way
-        round; 0 in the gaps between probes."""
-        start = self.probe_start(tick)
-        if start is None:
-            return 0.0
-        since, quarter = tick - start, self.probe_ticks // 4
-        if since >= self.probe_ticks:
-            return 0.0
-        first = (start - self.entered[Phase.DONE]) // self.monitor_ticks % 2 == 0
-        middle = quarter <= since < self.probe_ticks - quarter
-        return -1.0 if middle == first else 1.0
-
-    def _monitor_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
-        """A probe's common force, or the gap's damping of the COM's velocity."""
-        sign = self.probe_sign(k)
-        if sign:
-            return (sign * self.push[0], sign * self.push[1])
-        v = own.com_velocity or velocity
-        b = self.tuning.brake_gain
-        return (-b * v[0], -b * v[1])
+        return self._pushing(k, own, velocity, (sign * self.push[0], sign * self.push[1]))
 
     def push_sign(self, tick: int) -> float:
         """The sign of the common force during tick ``tick`` of the push phase: ``+`` for the
         first ``T/2``, then ``−`` and ``+`` for ``T`` each (``T`` = ``push_flip_s``; always
-        ``+`` for ``T = 0``); the other way round in the robust estimators' odd epochs (a
-        changed load's push swings the load back towards where it started)."""
+        ``+`` for ``T = 0``), all the other way round if the family's first sign is ``−``
+        (:meth:`_first_push_sign`)."""
         period = self.push_flip_ticks
         since = tick - self.entered.get(Phase.PUSH, tick)
-        first = -1.0 if self.robust and self.epoch % 2 else 1.0
+        first = self._first_push_sign()
         if period <= 0 or since < period // 2:
             return first
         return -first if (since - period // 2) // period % 2 == 0 else first
 
     def mean_push_damping(self, first: int, last: int) -> Vec2:
         """The mean of what each robot added to the common force over ticks ``first..last − 1``
-        (``push_damping``; zero without it)."""
+        (zero unless the family damps the push)."""
         added = [self._damping.get(t, (0.0, 0.0)) for t in range(first, last)]
         return (
             sum(a[0] for a in added) / len(added),
@@ -396,18 +263,6 @@ class PhaseMachine:
         input over an interval)."""
         return sum(self.push_sign(t) for t in range(first, last)) / (last - first)
 
-    # ---------------------------------------------------------------- for Step 4
-    def omega_at(self, tick: int, own: OwnEstimates) -> float:
-        """ω at ``t_tick``, predicted from the last instant it was measured with the torque the
-        team applied since (eq. 15) and ``Ĵ``: every robot, whichever messages it has received,
-        predicts the same value, so they all take the same decisions."""
-        omega = own.omega or 0.0
-        moment = own.moment
-        if own.measured is None or moment is None:
-            return omega
-        impulse = sum(self._torque.get(t, 0.0) for t in range(own.measured, tick))
-        return omega + impulse * self.dt / moment
-
     def mean_torque(self, first: int, last: int) -> float:
         """The team's mean torque (Step 4's input ``±k w``) over ticks ``first..last − 1``."""
         torques = [self._torque.get(t, 0.0) for t in range(first, last)]
@@ -417,6 +272,27 @@ class PhaseMachine:
         """Drop the torque and the damping of tick ``before`` (too old to be asked for)."""
         self._torque.pop(before, None)
         self._damping.pop(before, None)
+
+    # ---------------------------------------------------------------- a family's hooks
+    def _inertia_direction(self, k: int, own: OwnEstimates) -> float:
+        """``+1`` to speed the turn up during tick ``k`` of the inertia phase, ``−1`` to brake."""
+        raise NotImplementedError
+
+    def _push_magnitude(self, moment: float) -> float:
+        """The common force's size (N) for the push, given ``Ĵ`` (before ``max_force``)."""
+        raise NotImplementedError
+
+    def _pushing(self, k: int, own: OwnEstimates, velocity: Vec2, push: Vec2) -> Vec2:
+        """The force of tick ``k`` of the push, given the common force ``push`` with its sign."""
+        return push
+
+    def _first_push_sign(self) -> float:
+        """The common force's sign in the first half period of the push."""
+        return 1.0
+
+    def _done_laws(self) -> tuple[Ready, Law]:
+        """Once done: when the robot is ready to leave ``done``, and the force law."""
+        return (_never_ready, self._brake_force)
 
 
 def _never_ready(k: int, own: OwnEstimates) -> bool:

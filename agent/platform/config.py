@@ -222,6 +222,11 @@ def _fields(cls: type) -> dict[str, dataclasses.Field]:
     return {f.name: f for f in dataclasses.fields(cls)}
 
 
+def fields_of(cls: type) -> tuple[str, ...]:
+    """The field names of dataclass ``cls``: the keys of its table."""
+    return tuple(_fields(cls))
+
+
 # The shapes of the fields that :func:`_from_table` checks inline (every decoded protocol
 # message is mostly these; a value that does not fit its shape's common case goes to the
 # field's coercer, which accepts or explains it).
@@ -273,6 +278,12 @@ def _from_table(cls: type[T], table: Any, where: Key) -> T:
         raise ConfigError(f"{_key(where)}: expected a table, got {table!r}")
     if not table.keys() <= _fields(cls).keys():
         unknown = sorted(set(table) - set(_fields(cls)))
+        moved = getattr(cls, "MOVED_KEYS", {}).get(unknown[0])
+        if moved is not None:
+            raise ConfigError(
+                f"{_key(where)}.{unknown[0]}: this key lives in the {moved!r} table now:"
+                f" {_key(where)}.{moved}.{unknown[0]}"
+            )
         raise ConfigError(
             f"{_key(where)}.{unknown[0]}: unknown key (expected one of: {', '.join(_fields(cls))})"
         )

@@ -35,8 +35,10 @@ from enum import IntEnum
 
 import orjson as _orjson
 
+from agent.platform import team as _team
 from agent.platform.config import ConfigError, from_table
 from agent.platform.geometry import Vec2
+from agent.platform.team import TeamState
 
 Cov2 = tuple[float, float, float]
 """A 2×2 covariance ``(xx, xy, yy)``."""
@@ -89,59 +91,45 @@ class Command:
 
 
 @dataclass(frozen=True, slots=True)
+class Barrier:
+    """The sender's view of the team's phase barrier (:mod:`agent.algorithm.coordination`)."""
+
+    phase: Phase = Phase.EXCITE
+    ready: int = 0
+    """Bitmask of the robots known to be ready to leave ``phase`` (robot ``i`` is bit
+    ``i − 1``)."""
+    switch_at: int = -1
+    """The agreed tick of the switch (``-1`` while none is agreed)."""
+    load_changes: int = 0
+    """How many times the team has restarted at Step 4 for a changed load."""
+    rejoins: int = 0
+    """How many times the team has begun again from Step 1 after a halt (every robot back);
+    its ticks count from then on as from the start."""
+
+
+@dataclass(frozen=True, slots=True)
 class Share:
     """What agent ``sender`` sends its neighbours after its step at ``tick``.
 
-    ``velocity`` is the sender's sample of ``tick``. The consensus states refer to the
-    sender's *estimation instant* ``instant`` (the newest instant for which it had its
-    neighbours' velocities: ``tick - 1`` unless messages were late; ``-1`` before any);
-    vectors are in ``W`` at that instant.
-
-    - ``degree``: the sender's number of neighbours (Metropolis consensus weights).
-    - ``centroid``: the sender's centroid iterate ``x_i`` (Aragues et al. [10]) or ``None``.
-    - ``spread``: the sender's average-consensus state ``ξ_i`` for ``w = Σ‖z_i‖²`` (eq. 16).
-    - ``gain``, ``gain_centroid``, ``gain_spread``: the sender's average-consensus states for
-      the drives' gains: their mean ``ḡ``, ``Σ g_i z_i / n`` (in ``W`` at ``instant``) and
-      ``Σ g_i ‖z_i‖² / n`` (see :mod:`agent.algorithm.estimation.centroid`).
-    - ``flows``: ``(j, F_x, F_y, F_s, F_g, F_hx, F_hy, F_q, F_ι, F_μ)`` per neighbour ``j``:
-      the sender's outflows of the iterations on edge ``(sender, j)`` (see
-      :mod:`agent.algorithm.estimation.flows`).
-    - ``phase``, ``ready``, ``switch_at``, ``epoch``: the team's phase barrier (see
-      :mod:`agent.algorithm.coordination`): the sender's phase, the bitmask of robots known to be
-      ready to leave it, the agreed tick of the switch (``-1`` while none is agreed), and how many
-      times the team has restarted for a changed load.
-    - ``generation``: how many times the team has begun again after a halt (every robot back:
-      see :mod:`agent.algorithm.coordination`); its ticks count from then on as from the start.
-    - ``rotation``: the sender's level of the load's rotation at ``instant`` (rad, modulo
-      ``2π``: see :mod:`agent.algorithm.estimation.rotation`); ``rotation_variance``, its consensus
-      state ``ν`` for the robots' mean turn variance (rad²).
-    - ``mass_information``, ``mass_weighted``: the sender's average-consensus states ``ι`` and
-      ``μ`` for the team's mass (the robots' mass fits' information and information-weighted
-      mean, :mod:`agent.algorithm.estimation.centroid`).
+    ``velocity`` is the sender's sample of ``tick``; ``degree`` its number of neighbours
+    (Metropolis consensus weights); ``barrier`` its view of the team's phase barrier.
+    ``team`` holds its states of the team's quantities (:data:`agent.platform.team.
+    TEAM_QUANTITIES`, declared there once), which refer to the sender's *estimation instant*
+    ``instant`` (the newest instant for which it had its neighbours' velocities: ``tick - 1``
+    unless messages were late; ``-1`` before any); vectors are in ``W`` at that instant.
+    ``flows`` holds, per neighbour ``j``, ``(j, F…)``: the sender's outflows on edge
+    ``(sender, j)`` of the quantities averaged in flow form, in declaration order
+    (:mod:`agent.algorithm.estimation.team_consensus`).
     """
 
     sender: int
     tick: int
     velocity: Vec2
     degree: int
-    centroid: Vec2 | None = None
-    spread: float = 0.0
-    phase: Phase = Phase.EXCITE
-    ready: int = 0
-    switch_at: int = -1
-    flows: tuple[
-        tuple[int, float, float, float, float, float, float, float, float, float], ...
-    ] = ()
     instant: int = -1
-    gain: float = 1.0
-    gain_centroid: Vec2 = (0.0, 0.0)
-    gain_spread: float = 0.0
-    epoch: int = 0
-    generation: int = 0
-    rotation: float = 0.0
-    rotation_variance: float = 0.0
-    mass_information: float = 0.0
-    mass_weighted: float = 0.0
+    barrier: Barrier = Barrier()
+    team: TeamState = TeamState()
+    flows: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,7 +139,7 @@ class Estimates:
     ``None`` marks a quantity not estimated yet. ``relative_positions[j]`` is
     ``z_ij = p_Ci - p_Cj``; ``centroid_offset`` is ``z_i = p_Ci - p_G``; ``com_offset`` is
     ``z_C = p_G - p_C``; ``contact_to_com`` is ``p_C - p_Ci = -(z_i + z_C)``.
-    ``spread`` is ``w = Σ_i ‖z_i‖²`` as the robot knows it by consensus (eq. 16).
+    ``w`` is ``Σ_i ‖z_i‖²`` as the robot knows it by consensus (eq. 16).
     ``com_observer`` is observer (24)'s ``ẑ_C`` (run beside the team's estimate).
     ``phase_since`` is the tick at which the robot entered ``phase`` (the team's agreed switch
     tick, unless the robot caught up late). ``started`` maps a paper step (1..7) to the tick at
@@ -161,13 +149,13 @@ class Estimates:
     ``moment_std`` are standard deviations (kg, kg m²); ``contact_to_com_cov`` and each
     ``relative_positions_cov[j]`` are covariances ``(xx, xy, yy)`` (m²) of those vectors.
     ``drive_gain`` is the robot's estimate of its own drive's gain (applied over commanded
-    force, :mod:`agent.algorithm.estimation.drive_gain`), ``drive_gain_std`` its standard deviation.
+    force, :mod:`agent.algorithm.robust.drive_gain`), ``drive_gain_std`` its standard deviation.
 
-    ``epoch`` counts the team's restarts for a changed load (:mod:`agent.algorithm.coordination`);
+    ``load_changes`` counts the team's restarts at Step 4 for a changed load and ``rejoins`` its
+    new beginnings from Step 1 after a halt (:mod:`agent.algorithm.coordination`);
     ``change_score`` is the last probe's test of the load against the estimates, in standard
-    deviations (:mod:`agent.algorithm.estimation.load_change`; ``None`` before the first probe
-    ends). ``generation`` counts the team's new beginnings after a halt
-    (:mod:`agent.algorithm.coordination`).
+    deviations (:mod:`agent.algorithm.robust.load_change`; ``None`` before the first probe
+    ends).
     """
 
     robot: int
@@ -177,7 +165,7 @@ class Estimates:
     omega: float | None = None
     relative_positions: dict[int, Vec2] = field(default_factory=dict)
     centroid_offset: Vec2 | None = None
-    spread: float | None = None
+    w: float | None = None
     moment: float | None = None
     com_offset: Vec2 | None = None
     com_observer: Vec2 | None = None
@@ -192,9 +180,9 @@ class Estimates:
     relative_positions_cov: dict[int, Cov2] = field(default_factory=dict)
     drive_gain: float | None = None
     drive_gain_std: float | None = None
-    epoch: int = 0
+    load_changes: int = 0
     change_score: float | None = None
-    generation: int = 0
+    rejoins: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -208,7 +196,7 @@ class Status:
     decode_errors: int = 0
     late: int = 0
     lost_neighbours: tuple[int, ...] = ()
-    generation: int = 0
+    rejoins: int = 0
     """How many times the team has begun again after a halt
     (:mod:`agent.algorithm.coordination`)."""
 
@@ -471,22 +459,25 @@ class DecodeError(ValueError):
 
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct("<Hq2dHB2ddd2ddBQqqHHddddB")
-_FLOW = _struct.Struct("<H9d")
-_FLOW_FIELDS = 10
-"""A flow: the neighbour, then :data:`agent.algorithm.estimation.flows.Flow`'s nine numbers."""
+_SHARE = _struct.Struct(f"<Hq2dHqBQqHHH{_team.width(_team.TEAM_QUANTITIES)}dB")
+"""sender, tick, velocity, degree, instant; the barrier (phase, ready, switch_at,
+load_changes, rejoins); the team quantities' layout code (:func:`agent.platform.team.
+layout_code`) and their states, vectors' components in place; how many flows follow."""
+_FLOW = _struct.Struct(f"<H{_team.flow_width()}d")
+"""A flow: the neighbour, then the outflows of the flow-form quantities, in declaration order."""
+_TEAM_LAYOUT = _team.layout_code()
 _CLOCK = _struct.Struct("<qd")
 _ESTIMATES = _struct.Struct("<HqBqHBBBBHH")
 """robot, tick, phase, phase_since, which optional values follow (bit per
 :data:`_OPTIONAL_ESTIMATES` entry), how many relative positions, their covariances,
-started and settled steps follow them, then the epoch and the generation."""
+started and settled steps follow them, then the load changes and the rejoins."""
 _NEIGHBOUR = _struct.Struct("<H2d")
 _NEIGHBOUR_COV = _struct.Struct("<H3d")
 _STEP = _struct.Struct("<Bq")
 _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("omega", 1),
     ("centroid_offset", 2),
-    ("spread", 1),
+    ("w", 1),
     ("moment", 1),
     ("com_offset", 2),
     ("com_observer", 2),
@@ -543,30 +534,20 @@ def encode(message: object) -> bytes:
     if kind == 2:
         return head + _COMMAND.pack(m.robot, m.tick, *m.force)
     if kind == 3:
-        has = m.centroid is not None
-        cx, cy = m.centroid if has else (0.0, 0.0)
+        b = m.barrier
         fixed = _SHARE.pack(
             m.sender,
             m.tick,
             *m.velocity,
             m.degree,
-            has,
-            cx,
-            cy,
-            m.spread,
-            m.gain,
-            *m.gain_centroid,
-            m.gain_spread,
-            m.phase,
-            m.ready,
-            m.switch_at,
             m.instant,
-            m.epoch,
-            m.generation,
-            m.rotation,
-            m.rotation_variance,
-            m.mass_information,
-            m.mass_weighted,
+            b.phase,
+            b.ready,
+            b.switch_at,
+            b.load_changes,
+            b.rejoins,
+            _TEAM_LAYOUT,
+            *_team.flatten(m.team, _team.TEAM_QUANTITIES),
             len(m.flows),
         )
         return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
@@ -595,8 +576,8 @@ def _encode_estimates(m: Estimates) -> bytes:
         len(m.relative_positions_cov),
         len(m.started),
         len(m.settled),
-        m.epoch,
-        m.generation,
+        m.load_changes,
+        m.rejoins,
     )
     return b"".join(
         (
@@ -627,7 +608,7 @@ def _repeats(layout: _struct.Struct, count: int) -> _struct.Struct:
 def _decode_estimates(body: memoryview) -> Estimates:
     if len(body) < _ESTIMATES.size:
         raise DecodeError(f"estimates: {len(body)} bytes, expected at least {_ESTIMATES.size}")
-    robot, tick, phase, since, present, neighbours, covs, started, settled, epoch, generation = (
+    robot, tick, phase, since, present, neighbours, covs, started, settled, changes, rejoins = (
         _ESTIMATES.unpack_from(body)
     )
     if present >> len(_OPTIONAL_ESTIMATES):
@@ -680,10 +661,30 @@ def _decode_estimates(body: memoryview) -> Estimates:
         started=steps,
         settled=done,
         relative_positions_cov=relative_cov,
-        epoch=epoch,
-        generation=generation,
+        load_changes=changes,
+        rejoins=rejoins,
         **optional,
     )
+
+
+def _decode_share(body: memoryview) -> Share:
+    values = _unpack(_SHARE, body[: _SHARE.size], "share")
+    sender, tick, vx, vy, degree, instant, phase, ready, switch_at, changes, rejoins = values[:11]
+    layout, count = values[11], values[-1]
+    if layout != _TEAM_LAYOUT:
+        raise DecodeError(
+            f"share: team quantities of layout 0x{layout:04x}, this program's 0x{_TEAM_LAYOUT:04x}"
+        )
+    rest = body[_SHARE.size :]
+    if len(rest) != count * _FLOW.size:
+        raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
+    flows = tuple(
+        _unpack(_FLOW, rest[i : i + _FLOW.size], "share flow")
+        for i in range(0, len(rest), _FLOW.size)
+    )
+    barrier = Barrier(_phase(phase, "share"), ready, switch_at, changes, rejoins)
+    team = TeamState(*_team.grouped(values[12:-1], _team.TEAM_QUANTITIES))
+    return Share(sender, tick, (vx, vy), degree, instant, barrier, team, flows)
 
 
 def _check_header(payload: bytes, expected: int) -> memoryview:
@@ -744,18 +745,12 @@ MAX_SPEED = 500.0
 """m/s, a contact point's velocity."""
 MAX_FORCE = 10_000.0
 """N, a commanded or measured force."""
-MAX_DISTANCE = 10_000.0
-"""m, a position or offset shared between agents."""
-MAX_FLOW = 1e9
-"""What has flowed on an edge of the consensus iterations (m, m² and gains)."""
-MAX_TURN_VARIANCE = 100.0
-"""rad²: a robot's turn's variance over one instant, or the team's mean as a consensus state
-(a turn measured from ``ż``'s direction alone has at most 1e-3)."""
-MAX_GAIN = 100.0
-"""A drive's gain, or the team's mean gain as a consensus state."""
-MAX_EPOCH = 10_000
+MAX_DISTANCE = _team.MAX_DISTANCE
+MAX_FLOW = _team.MAX_FLOW
+MAX_GAIN = _team.MAX_GAIN
+MAX_LOAD_CHANGES = 10_000
 """The team's restarts for a changed load in one run (one a second for almost three hours)."""
-MAX_GENERATION = 10_000
+MAX_REJOINS = 10_000
 """The team's new beginnings after a halt in one run."""
 
 
@@ -792,31 +787,25 @@ def _share(m: Share) -> None:
     _within("share.tick", m.tick, 0, MAX_TICK)
     _bounded("share.velocity", m.velocity, MAX_SPEED)
     _within("share.degree", m.degree, 1, MAX_ROBOT_ID)
-    if m.centroid is not None:
-        _bounded("share.centroid", m.centroid, MAX_DISTANCE)
-    _within("share.spread", m.spread, -(MAX_DISTANCE**2), MAX_DISTANCE**2)
-    _within("share.switch_at", m.switch_at, -1, MAX_TICK)
-    _within("share.epoch", m.epoch, 0, MAX_EPOCH)
-    _within("share.generation", m.generation, 0, MAX_GENERATION)
-    _within("share.rotation", m.rotation, -_math.pi, _math.pi)
-    _within("share.rotation_variance", m.rotation_variance, -MAX_TURN_VARIANCE, MAX_TURN_VARIANCE)
-    _within("share.mass_information", m.mass_information, -MAX_FLOW, MAX_FLOW)
-    _within("share.mass_weighted", m.mass_weighted, -MAX_FLOW, MAX_FLOW)
     _within("share.instant", m.instant, -1, m.tick - 1)
+    b = m.barrier
+    _within("share.barrier.switch_at", b.switch_at, -1, MAX_TICK)
+    _within("share.barrier.load_changes", b.load_changes, 0, MAX_LOAD_CHANGES)
+    _within("share.barrier.rejoins", b.rejoins, 0, MAX_REJOINS)
+    outside = _team.check_state(m.team, _team.TEAM_QUANTITIES, "share.team")
+    if outside is not None:
+        raise DecodeError(outside)
     _within("share.flows (how many)", len(m.flows), 0, m.degree)
-    _within("share.gain", m.gain, -MAX_GAIN, MAX_GAIN)
-    _bounded("share.gain_centroid", m.gain_centroid, MAX_GAIN * MAX_DISTANCE)
-    _within(
-        "share.gain_spread", m.gain_spread, -MAX_GAIN * MAX_DISTANCE**2, MAX_GAIN * MAX_DISTANCE**2
-    )
     for flow in m.flows:
         if len(flow) != _FLOW_FIELDS:
             raise DecodeError(f"share.flows: expected {_FLOW_FIELDS} numbers a flow, got {flow!r}")
-        j, fx, fy, *scalars = flow
-        _robot_id("share.flows.robot", j)
-        _bounded("share.flows", (fx, fy), MAX_FLOW)
-        for f in scalars:
+        _robot_id("share.flows.robot", flow[0])
+        for f in flow[1:]:
             _within("share.flows", f, -MAX_FLOW, MAX_FLOW)
+
+
+_FLOW_FIELDS = 1 + _team.flow_width()
+"""A flow's numbers: the neighbour, then the outflows."""
 
 
 def _clock(m: Clock) -> None:
@@ -829,8 +818,8 @@ def _estimates(m: Estimates) -> None:
     _robot_id("estimates.robot", m.robot)
     _within("estimates.tick", m.tick, -1, MAX_TICK)
     _within("estimates.phase_since", m.phase_since, 0, MAX_TICK)
-    _within("estimates.epoch", m.epoch, 0, MAX_EPOCH)
-    _within("estimates.generation", m.generation, 0, MAX_GENERATION)
+    _within("estimates.load_changes", m.load_changes, 0, MAX_LOAD_CHANGES)
+    _within("estimates.rejoins", m.rejoins, 0, MAX_REJOINS)
     for j in m.relative_positions:
         _robot_id("estimates.relative_positions", j)
     for step in (*m.started, *m.settled):
@@ -860,7 +849,7 @@ def _status(m: Status) -> None:
     _within("status.tick", m.tick, -1, MAX_TICK)
     for j in m.lost_neighbours:
         _robot_id("status.lost_neighbours", j)
-    _within("status.generation", m.generation, 0, MAX_GENERATION)
+    _within("status.rejoins", m.rejoins, 0, MAX_REJOINS)
 
 
 def _truth(m: Truth) -> None:
@@ -952,40 +941,7 @@ def _decode(kind: type, payload: bytes):
         r, t, fx, fy = _unpack(_COMMAND, body, "command")
         return Command(r, t, (fx, fy))
     if kind is Share:
-        fixed = body[: _SHARE.size]
-        values = _unpack(_SHARE, fixed, "share")
-        s, t, vx, vy, deg, has, cx, cy, spread, gain, hx, hy, q = values[:13]
-        phase, ready, switch_at, instant, epoch, generation = values[13:19]
-        rotation, rotation_variance, iota, mu, count = values[19:]
-        rest = body[_SHARE.size :]
-        if len(rest) != count * _FLOW.size:
-            raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
-        flows = tuple(
-            _unpack(_FLOW, rest[i : i + _FLOW.size], "share flow")
-            for i in range(0, len(rest), _FLOW.size)
-        )
-        return Share(
-            s,
-            t,
-            (vx, vy),
-            deg,
-            (cx, cy) if has else None,
-            spread,
-            _phase(phase, "share"),
-            ready,
-            switch_at,
-            flows,
-            instant,
-            gain,
-            (hx, hy),
-            q,
-            epoch,
-            generation,
-            rotation,
-            rotation_variance,
-            iota,
-            mu,
-        )
+        return _decode_share(body)
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))
     if kind is Estimates:

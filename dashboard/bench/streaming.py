@@ -177,7 +177,7 @@ def estimates(robot: int, n: int, tick: int) -> Estimates:
         omega=0.3 + 0.01 * math.sin(t),
         relative_positions={left: (1.0 + 0.1 * math.exp(-t), 0.5), right: (-1.0, 0.2)},
         centroid_offset=(0.5, 0.5),
-        spread=2.0,
+        w=2.0,
         moment=12.3 + math.exp(-t),
         com_offset=(0.1, -0.1),
         com_observer=(0.1, -0.1),

@@ -556,8 +556,8 @@ function drawTable(scene) {
     rows.push(`<tr title="${c}"><td><span class="swatch" style="background:${colour(Number(robot))}"></span>${robot}</td>`
       + `<td style="color:${PHASE_COLOURS[row.phase] || "inherit"}"`
       + ` title="probe score: ${row.change_score == null ? "–" : fmt(row.change_score, 1) + " σ"}">`
-      + `${row.phase}${row.epoch ? ` <span class="epoch">(load changed: epoch ${row.epoch})</span>` : ""}`
-      + `${row.generation ? ` <span class="epoch">(begun again: generation ${row.generation})</span>` : ""}</td>`
+      + `${row.phase}${row.load_changes ? ` <span class="epoch">(load changes: ${row.load_changes})</span>` : ""}`
+      + `${row.rejoins ? ` <span class="epoch">(begun again: rejoin ${row.rejoins})</span>` : ""}</td>`
       + `<td>${fmt(row.mass, 4)}</td><td>${fmt(row.moment, 4)}</td>`
       + `<td>${fmt(e.mass_pct, 3)}</td><td>${fmt(e.moment_pct, 3)}</td>`
       + `<td>${fmt(e.contact_to_com_mm, 2)}</td><td>${fmt(e.z_ij_mm, 2)}</td></tr>`);

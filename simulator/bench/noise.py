@@ -140,10 +140,13 @@ def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Est
             estimator=estimator,
             spin_speed=settings.spin_speed,
             spin_gain=settings.spin_gain,
-            push_force=settings.push_force,
             push_flip_s=settings.push_flip_s,
-            push_damping=settings.push_damping,
-            inertia_brake_s=settings.inertia_brake_s,
+            robust=dataclasses.replace(
+                scenario.agent.robust,
+                push_force=settings.push_force,
+                push_damping=settings.push_damping,
+                inertia_brake_s=settings.inertia_brake_s,
+            ),
         ),
     )
 

@@ -17,7 +17,7 @@ Observer (24), with ``k_e > 0``::
 With ``e = x − x̂``, ``V = ½‖e‖²`` has ``V̇ = −k_e e_3²`` (notes): the error never grows, and
 it converges while ω ≠ 0 and f̄_y ≠ 0 (Prop. V.1, Thm. V.1). It converges slowly for many
 loads (tens of seconds to reach millimetres), so the team's ``z_C`` comes from
-:class:`~agent.algorithm.estimation.com_regression.ComRegression`; this observer runs beside it.
+:class:`~agent.algorithm.paper.com_regression.ComRegression`; this observer runs beside it.
 The observer is integrated with classical Runge-Kutta over each sampling interval, with the
 measured ``ω`` interpolated linearly.
 """

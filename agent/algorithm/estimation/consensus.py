@@ -9,8 +9,8 @@ where ``r_i`` is the robot's own input (``‖z_i‖²`` for Step 4's ``w = Σ‖
 ``Σ_j a_ij < 1``, so the iteration converges on any connected graph using only the
 neighbours' degrees. The last term lets the input change while consensus runs: ``Σ ξ_i = Σ r_i``
 at every step, so once the inputs settle every ``ξ_i`` converges to their average ``w / n``.
-:class:`~agent.algorithm.estimation.centroid.CentroidConsensus` runs it beside Step 2, in flow form
-(:mod:`agent.algorithm.estimation.flows`), which keeps that sum when messages are lost.
+:class:`~agent.algorithm.estimation.team_consensus.TeamConsensus` runs it beside Step 2, in flow
+form, which keeps that sum when messages are lost.
 """
 
 from __future__ import annotations

@@ -11,17 +11,15 @@ measured then and the interval's length ``dt`` (s), always the last argument; be
 nothing changes. The estimators built on the filtered regression (the Appendix, eq. 26) start
 their filters on the first sample, with no transient, so that call's ``dt`` is not used.
 
-The estimators and what they estimate:
+The estimators and what they estimate, shared by every family:
 
-- :class:`~agent.algorithm.estimation.relative_position.RelativePosition`: Step 1, ``z_ij`` (eqs.
-10-12);
-- :class:`~agent.algorithm.estimation.centroid.CentroidConsensus`: Step 2, ``z_i``, with ``w / n``
-  (eq. 16);
-- :class:`~agent.algorithm.estimation.inertia.InertiaEstimator`: Step 4, ``J`` (eq. 15);
-- :class:`~agent.algorithm.estimation.com_regression.ComRegression`: Step 5, ``z_C`` at a reference
-  instant (eq. 18);
-- :class:`~agent.algorithm.estimation.com_observer.ComObserver`: Step 5, ``z_C`` by observer (24);
-- :class:`~agent.algorithm.estimation.mass.MassEstimator`: Step 7, ``m`` (eq. 25).
+- :class:`~agent.algorithm.estimation.team_consensus.TeamConsensus`: Step 2, ``z_i``, with
+  ``w / n`` (eq. 16) and the team's other means;
+- :class:`~agent.algorithm.estimation.com_observer.ComObserver`: Step 5, ``z_C`` by observer
+  (24);
+
+and each family's own, of Steps 1, 4, 5 and 7 (:mod:`agent.algorithm.paper`,
+:mod:`agent.algorithm.robust`).
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-from agent.algorithm.estimation.least_squares import LeastSquares, Solution
+from agent.algorithm.robust.least_squares import LeastSquares, Solution
 from agent.platform.geometry import Vec2, rotate, turned_covariance
 
 Cov2 = tuple[float, float, float]

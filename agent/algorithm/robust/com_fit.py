@@ -2,7 +2,7 @@
 
 Under the common force ``s(t) f`` (eq. 17; the sign ``s = ±1`` reverses on the agreed clock,
 :meth:`~agent.algorithm.phase_machine.PhaseMachine.push_sign`) the torque about the COM is
-``n s (z_C⊥)ᵀ f``, so (eq. 18, as in :mod:`agent.algorithm.estimation.com_regression`) with
+``n s (z_C⊥)ᵀ f``, so (eq. 18, as in :mod:`agent.algorithm.paper.com_regression`) with
 ``z_C(t) = R(α(t)) c``, ``α`` the rotation since the push began and ``c`` the offset then,
 
     θ̈ = φ(t)ᵀ c,      φ(t) = s(t) (n/J) R(−α(t)) Qᵀ f.
@@ -13,8 +13,8 @@ Integrating twice from the push's first instant ``t₀``,
 
 linear in ``(θ₀, ω₀, c_x, c_y)`` (a force ``a(t)`` that every robot adds to the push,
 ``push_damping``'s, adds ``(n/J) R(−α) Qᵀ a`` to ``φ``; with the drives' lag ``τ_d`` from Step 4,
-``Ψ − τ_d ∫φ + τ_d² φ`` in place of ``Ψ``, as in :mod:`agent.algorithm.estimation.mass_fit`): least
-squares on the angle itself (tracked from the arc fits, :mod:`agent.algorithm.estimation.arc_fit`),
+``Ψ − τ_d ∫φ + τ_d² φ`` in place of ``Ψ``, as in :mod:`agent.algorithm.robust.mass_fit`): least
+squares on the angle itself (tracked from the arc fits, :mod:`agent.algorithm.robust.arc_fit`),
 never on a differentiated or filtered ω. Over an
 interval ``h`` the regressor's integrals grow by the trapezoid ``∫φ ≈ h (φ₀ + φ₁)/2`` (made
 exact for a uniform turn by :func:`~agent.platform.geometry.arc_factor`) and
@@ -22,15 +22,15 @@ exact for a uniform turn by :func:`~agent.platform.geometry.arc_factor`) and
 for ``Ψ`` to span the plane (Prop. V.1: ω ≠ 0, f ≠ 0).
 
 Uncertainty: the fit's ``σ̂² M⁻¹`` for ``c``, scaled for the angle's correlated errors as in
-:mod:`agent.algorithm.estimation.inertia_fit`
-(:data:`~agent.algorithm.estimation.least_squares.CORRELATION_TIME`). It does not include the error
+:mod:`agent.algorithm.robust.inertia_fit`
+(:data:`~agent.algorithm.robust.least_squares.CORRELATION_TIME`). It does not include the error
 of ``Ĵ``, which scales ``c`` (``c ∝ J``).
 """
 
 from __future__ import annotations
 
 from agent.algorithm.estimation.estimator import largest_std
-from agent.algorithm.estimation.least_squares import RunFit
+from agent.algorithm.robust.least_squares import RunFit
 from agent.platform.geometry import Vec2, arc_factor, rotate
 
 

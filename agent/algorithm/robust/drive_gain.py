@@ -14,7 +14,7 @@ of the lag biased ``ĝ`` by −1.2 % and −1.3 % (the team's mean, seeds 1 and 
 is run alongside; least squares gives ``ĝ = Σ f̄ ȳ / Σ ȳ²`` for each, and the lag whose
 residual is least is taken. Its variance is ``σ̂² / Σ ȳ²`` (the noise is white).
 
-The team's mean gain ``ḡ`` (by consensus, :mod:`agent.algorithm.estimation.centroid`) scales the
+The team's mean gain ``ḡ`` (by consensus, :mod:`agent.algorithm.robust.team_mass`) scales the
 force the robust Step 7 assumed: the team pushed with ``n ḡ f``, not ``n f``, so ``m`` is ``ḡ``
 times its fit's.
 """

@@ -10,7 +10,7 @@ a linear regression of the Appendix's kind (``y = y_ij``, ``u = ż_ij``). Prop. 
 by the instantaneous ratio (eq. 12, ``‖z_ij‖ = ‖ż_ij^f‖ / (k_f ‖y_ij − y_ij^f‖)``, sign from
 ``−sign[(ż_ij^f)ᵀ(y_ij − y_ij^f)]``); here the same filtered regression is solved by least
 squares over all samples
-(:class:`~agent.algorithm.estimation.filtered_regression.FilteredRegression`), which is the same
+(:class:`~agent.algorithm.paper.filtered_regression.FilteredRegression`), which is the same
 estimator without noise and averages noise with it.
 
 ``y_ij`` reverses when ω changes sign. The estimator follows the reversals by continuity
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-from agent.algorithm.estimation.filtered_regression import FilteredRegression
+from agent.algorithm.paper.filtered_regression import FilteredRegression
 from agent.platform.geometry import Vec2, angle_between, arc_factor
 
 

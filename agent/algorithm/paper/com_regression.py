@@ -15,7 +15,7 @@ enough for ``φ`` to span the plane — the observability condition of Prop. V.1
 
 from __future__ import annotations
 
-from agent.algorithm.estimation.filtered_regression import FilteredRegression
+from agent.algorithm.paper.filtered_regression import FilteredRegression
 from agent.platform.geometry import Vec2, arc_factor, rotate
 
 

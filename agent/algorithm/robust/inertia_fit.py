@@ -11,7 +11,7 @@ first order the torque then acts ``τ_d`` late, ``Φ(t − τ_d) ≈ Φ(t) − �
 ``Ω = ∫τ``, so a fourth column ``Ω`` with the unknown ``−τ_d / J`` takes it up (zero for ideal
 drives). The angle ``θ`` is the rotation the team tracks from its arc fits (Step 1, the
 sum of each instant's turn of the ``z_ij``, averaged over the team by
-:mod:`agent.algorithm.estimation.rotation`), whose error is millimetres over metres, where
+:mod:`agent.algorithm.robust.rotation`), whose error is millimetres over metres, where
 eq. (5)'s instantaneous ``ω = (z_ij⊥)ᵀ ż_ij / ‖z_ij‖²`` carries the velocity noise of every
 sample. Between two instants ``h`` apart with a constant torque ``τ``, ``Φ`` grows by
 ``Ω h + τ h²/2`` and ``Ω = ∫τ`` by ``τ h``: exact for the piecewise-constant torque the team
@@ -19,7 +19,7 @@ applies.
 
 Uncertainty: ``σ̂² (AᵀA)⁻¹`` of the fit assumes independent residuals; the angle's errors (the
 arc fits' walk) are correlated, so the rows count as one per
-:data:`~agent.algorithm.estimation.least_squares.CORRELATION_TIME`: the variance is scaled by
+:data:`~agent.algorithm.robust.least_squares.CORRELATION_TIME`: the variance is scaled by
 ``CORRELATION_TIME / Δt``. Then
 ``std(Ĵ) = std(p₃) / p₃²``, combined with the relative uncertainty of the torque's scale (``w``,
 from Step 2: ``Ĵ ∝ w``) given at the start.
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-from agent.algorithm.estimation.least_squares import ReciprocalFit
+from agent.algorithm.robust.least_squares import ReciprocalFit
 
 
 class InertiaFit(ReciprocalFit):

@@ -11,7 +11,7 @@ the Appendix's filtered regression with ``y = ṗ_C`` and ``u = n f_m``.
 
 from __future__ import annotations
 
-from agent.algorithm.estimation.filtered_regression import FilteredRegression
+from agent.algorithm.paper.filtered_regression import FilteredRegression
 from agent.platform.geometry import Vec2
 
 

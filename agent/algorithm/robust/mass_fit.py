@@ -10,7 +10,7 @@ accelerates at ``n s f / m`` (Step 7), so from the mass fit's first instant ``t�
 linear in ``(v₀ₓ, v₀ᵧ, 1/m)`` with one row per axis (a force ``a(t)`` that every robot adds
 to the push, ``push_damping``'s, adds ``n ∫∫a`` to the last regressor, lagged alike);
 ``τ_d`` is the drives' lag, which Step 4's fit found
-(:attr:`~agent.algorithm.estimation.inertia_fit.InertiaFit.lag`): a drive with a first-order lag
+(:attr:`~agent.algorithm.robust.inertia_fit.InertiaFit.lag`): a drive with a first-order lag
 applies ``s/(1 + τ_d p)`` (``p`` = d/dt), whose double integral is
 ``S − τ_d Σ + τ_d² s/(1 + τ_d p)``; the last term's lag is left out (it only matters for a
 tick after each reversal). A robot measures the displacement without
@@ -28,12 +28,12 @@ Uncertainty: the fit's ``σ̂² M⁻¹`` as it is, every row counted (over 40 ru
 scenario at 1 cm/s, seeds 0–39, the rows counted one per 0.2 s gave standard deviations eight
 times the errors'); ``std(m̂) = std(1/m) m̂²``. The fit takes the
 commanded force for the applied one; the pipeline scales its ``m`` by the drives' mean gain
-(:mod:`agent.algorithm.estimation.drive_gain`).
+(:mod:`agent.algorithm.robust.drive_gain`).
 """
 
 from __future__ import annotations
 
-from agent.algorithm.estimation.least_squares import ReciprocalFit
+from agent.algorithm.robust.least_squares import ReciprocalFit
 from agent.platform.geometry import Vec2, rotate
 
 

@@ -29,7 +29,7 @@ Direction. ``s(t) − c`` carries the walk, which grows as ``√t``; the radius 
 direction ``ψ`` of ``z_ij`` is filtered on its own (a scalar Kalman filter): it turns by the
 arc's increment between samples (its process noise is the walk's step, ``σ_e Δt / (r √2)`` of
 angle: the trapezoid averages two samples), or by the team's turn, which averages every edge's
-increments (:meth:`follow`, :mod:`agent.algorithm.estimation.rotation`: its process noise is then a
+increments (:meth:`follow`, :mod:`agent.algorithm.robust.rotation`: its process noise is then a
 share of that step's), and each sample measures it without any walk:
 ``z_ij = −ż_ij⊥ / ω`` (eq. 10, the notes' correction) points along ``∓ż_ij⊥``, the sign that
 of the filter's prediction, with an angular noise of ``σ_e / ‖ż_ij‖`` (``σ_e²`` the
@@ -40,7 +40,7 @@ relative velocity's noise variance per axis, measured from the samples' second d
 
 The circle is determined once the arc is long enough: :attr:`estimate` is ``None`` until the
 fitted radius is known to within half of itself. Sums are kept with an optional exponential
-forgetting, O(1) per sample (:class:`~agent.algorithm.estimation.least_squares.LeastSquares`).
+forgetting, O(1) per sample (:class:`~agent.algorithm.robust.least_squares.LeastSquares`).
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from __future__ import annotations
 import math
 
 from agent.algorithm.estimation.estimator import Covariance, largest_std
-from agent.algorithm.estimation.least_squares import LeastSquares, Solution
+from agent.algorithm.robust.least_squares import LeastSquares, Solution
 from agent.platform.geometry import Vec2, angle_between
 
 DIRECTION_VARIANCE = 1.5

@@ -1,7 +1,7 @@
 """The load's rotation, agreed by the team: every robot's arcs averaged by consensus.
 
 Each robot follows the load's rotation ``θ`` from its own edges (Step 1's arcs): between two
-instants each edge ``ij`` measures the turn ``δ_ij`` (:attr:`~agent.algorithm.estimation.arc_fit.
+instants each edge ``ij`` measures the turn ``δ_ij`` (:attr:`~agent.algorithm.robust.arc_fit.
 ArcRelativePosition.last_turn`), with a noise whose variance is ``σ_e² Δt² / (2 r_ij²)`` once
 its circle is known (the arc's step across its radius) and ``2 σ_e² / ‖ż_ij‖²`` before (two
 directions of ``ż_ij``). The robot's own turn is their information-weighted mean
@@ -33,10 +33,10 @@ so ``2 ν / n`` with ``ν`` the robots' mean ``Var(δ_i) = 1 / Σ_j λ_ij``, ave
 consensus with the own variance as input: the direction filters' process noise
 (:attr:`RotationConsensus.turn_variance`).
 
-Levels are sent modulo ``2π`` (``Share.rotation``) and compared by the wrapped difference: the
-robots' disagreement is a small angle. Without the flow form of
-:mod:`agent.algorithm.estimation.flows` a lost message shifts the team's mean level by ``a_ij``
-times a disagreement of the order of one turn's noise: a negligible turn, once.
+Levels are sent modulo ``2π`` (the team quantity ``rotation``) and compared by the wrapped
+difference: the robots' disagreement is a small angle. Without the flow form of
+:mod:`agent.algorithm.estimation.team_consensus` a lost message shifts the team's mean level
+by ``a_ij`` times a disagreement of the order of one turn's noise: a negligible turn, once.
 """
 
 from __future__ import annotations

@@ -1,0 +1,121 @@
+"""The robust estimators' force laws where the families differ.
+
+- *inertia*: the robots' ω differ by their noise, so rather than reverse on ``|ω|`` the torque
+  speeds up for ``inertia_flip_s`` and brakes for as long, in turn, from the agreed tick on
+  (after braking first for ``inertia_brake_s``: with half a flip, ω swings about the turn the
+  load had, by half of what speeding up first adds to it, which keeps a compact, light load's
+  turn on its floor);
+- *push*: the configured ``push_force``, the same for every robot whatever its Ĵ; with
+  ``push_damping = b`` each robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity
+  (which every robot estimates alike), so that a light load's speed stays within about ``f/b``
+  and a heavy one's drift dies out (Steps 5 and 7 take the force as commanded); after an odd
+  number of load changes the push begins the other way, swinging the load back towards where it
+  started;
+- *done* (with ``change_threshold`` > 0): the team keeps watching the load, in cycles on the
+  agreed clock: a gap of ``monitor_gap_s`` in which each robot damps the COM's velocity,
+  ``−b ṗ̂_C`` (Step 6's estimate: the load keeps its turn, which Step 5's fit needs, and loses
+  its drift), then a *probe* of ``probe_s = T``, the push's common force ``+f`` for ``T/4``,
+  ``−f`` for ``T/2`` and ``+f`` for ``T/4``: the COM's velocity and place come back to where
+  they were, after a swing of ``n f T²/16m``; every other probe swings the other way. A robot
+  whose probe finds the load no longer the one estimated (:mod:`agent.algorithm.robust.
+  load_change`) is ready to leave ``done``, and the team restarts at ``inertia`` at an agreed
+  tick (:mod:`agent.algorithm.coordination`).
+"""
+
+from __future__ import annotations
+
+from agent.algorithm.interfaces import OwnEstimates
+from agent.algorithm.phase_machine import Law, PhaseMachine, Ready, _never_ready
+from agent.algorithm.safety import saturate
+from agent.algorithm.tuning import AgentConfig
+from agent.platform.geometry import Vec2, rotate
+from agent.platform.protocol import Phase
+
+
+class RobustPhases(PhaseMachine):
+    """The phase machine of the robust estimators."""
+
+    def __init__(self, config: AgentConfig, barrier=None):
+        robust = config.tuning.robust
+        dt = config.period_s
+        self.flip_ticks = round(robust.inertia_flip_s / dt)
+        self.brake_ticks = round(robust.inertia_brake_s / dt)
+        self.monitoring = robust.change_threshold > 0.0
+        """Whether the team probes the load once done (see the module docstring)."""
+        self.probe_ticks = 4 * max(1, round(robust.probe_s / (4 * dt)))
+        """A probe's length: a multiple of 4 ticks."""
+        self.gap_ticks = max(1, round(robust.monitor_gap_s / dt))
+        self.monitor_ticks = self.gap_ticks + self.probe_ticks
+        """A monitoring cycle: the gap, then a probe."""
+        super().__init__(config, barrier)
+
+    def _inertia_direction(self, k: int, own: OwnEstimates) -> float:
+        """Speed up, then brake as long (after braking for ``inertia_brake_s``), from the
+        agreed tick on: every robot takes the same decisions whatever the noise on its ω."""
+        since = k - self.since - self.brake_ticks
+        flips = since // max(1, self.flip_ticks)
+        return 1.0 if since >= 0 and flips % 2 == 0 else -1.0
+
+    def _push_magnitude(self, moment: float) -> float:
+        return self.tuning.robust.push_force
+
+    def _first_push_sign(self) -> float:
+        return -1.0 if self.load_changes % 2 else 1.0
+
+    def _pushing(self, k: int, own: OwnEstimates, velocity: Vec2, push: Vec2) -> Vec2:
+        """The push with ``push_damping``'s ``−b ṗ̂_G`` added (recorded for Steps 5 and 7)."""
+        b = self.tuning.robust.push_damping
+        if not b > 0.0:
+            return push
+        # ṗ_G = ṗ_Ci − ω Q z_i, z_i turned to t_k from the estimation instant.
+        omega = own.omega or 0.0
+        z = rotate(own.centroid, omega * (k - own.instant) * self.dt)
+        centroid_velocity = (velocity[0] + omega * z[1], velocity[1] - omega * z[0])
+        force = saturate(
+            (push[0] - b * centroid_velocity[0], push[1] - b * centroid_velocity[1]),
+            self.tuning.max_force,
+        )
+        self._damping[k] = (force[0] - push[0], force[1] - push[1])
+        return force
+
+    # ---------------------------------------------------------------- once done: probes
+    def _done_laws(self) -> tuple[Ready, Law]:
+        if self.monitoring:
+            return (_changed, self._monitor_force)
+        return (_never_ready, self._brake_force)
+
+    def probe_start(self, tick: int) -> int | None:
+        """The first tick of the last probe begun by tick ``tick`` (``None`` while the team is
+        not done, not probing, or in the gap before the first probe)."""
+        done = self.entered.get(Phase.DONE)
+        if not self.monitoring or done is None or tick < done + self.gap_ticks:
+            return None
+        since = tick - done - self.gap_ticks
+        return tick - since % self.monitor_ticks
+
+    def probe_sign(self, tick: int) -> float:
+        """The common force's sign during tick ``tick`` of a probe: ``+`` for ``T/4``, ``−``
+        for ``T/2``, ``+`` for ``T/4`` (``T`` = ``probe_s``), every other probe the other way
+        round; 0 in the gaps between probes."""
+        start = self.probe_start(tick)
+        if start is None:
+            return 0.0
+        since, quarter = tick - start, self.probe_ticks // 4
+        if since >= self.probe_ticks:
+            return 0.0
+        first = (start - self.entered[Phase.DONE]) // self.monitor_ticks % 2 == 0
+        middle = quarter <= since < self.probe_ticks - quarter
+        return -1.0 if middle == first else 1.0
+
+    def _monitor_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
+        """A probe's common force, or the gap's damping of the COM's velocity."""
+        sign = self.probe_sign(k)
+        if sign:
+            return (sign * self.push[0], sign * self.push[1])
+        v = own.com_velocity or velocity
+        b = self.tuning.brake_gain
+        return (-b * v[0], -b * v[1])
+
+
+def _changed(k: int, own: OwnEstimates) -> bool:
+    return own.changed

@@ -1,0 +1,284 @@
+"""The robust estimators at each instant: the same steps, on noisy sensors and real drives.
+
+Step 1 by the arc fit (:class:`~agent.algorithm.robust.arc_fit.ArcRelativePosition`), whose
+directions follow the team's agreed rotation of the load (:mod:`agent.algorithm.robust.
+rotation`); Steps 4, 5 and 7 by least squares on that rotation angle and on the COM's
+displacement (:class:`~agent.algorithm.robust.inertia_fit.InertiaFit`,
+:class:`~agent.algorithm.robust.com_fit.ComFit`, :class:`~agent.algorithm.robust.mass_fit.
+MassFit`), corrected for the drives' gains (:mod:`agent.algorithm.robust.drive_gain`,
+:mod:`agent.algorithm.robust.team_mass`); the team's mass as a consensus on information; once
+done, probes that test the load for a change (:mod:`agent.algorithm.robust.load_change`).
+Settling is judged by each estimate's own uncertainty, and the uncertainties are published
+(:mod:`agent.algorithm.robust.uncertainty`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from agent.algorithm.pipeline import EstimationPipeline
+from agent.algorithm.robust.arc_fit import ArcRelativePosition
+from agent.algorithm.robust.com_fit import ComFit
+from agent.algorithm.robust.drive_gain import DriveGain
+from agent.algorithm.robust.inertia_fit import InertiaFit
+from agent.algorithm.robust.load_change import ProbeFit
+from agent.algorithm.robust.mass_fit import MassFit
+from agent.algorithm.robust.rotation import RotationConsensus, own_turn, turn_weight, wrapped
+from agent.algorithm.robust.team_mass import inputs, mass_input, team_mass
+from agent.algorithm.robust.uncertainty import published
+from agent.algorithm.tuning import AgentConfig
+from agent.platform.geometry import Vec2
+
+if TYPE_CHECKING:
+    from agent.algorithm.inbox import Inbox
+    from agent.algorithm.interfaces import ProbeSchedule
+
+
+class RobustPipeline(EstimationPipeline):
+    """One robot's estimates by the robust estimators."""
+
+    mass_after_com = False  # the mass fit starts with the push (see MassFit)
+
+    def __init__(self, config: AgentConfig, neighbours: tuple[int, ...]):
+        self._settle_uncertainty = config.tuning.robust.settle_uncertainty
+        self.drive = DriveGain()
+        """This robot's drive gain (Step 7 scales ``m`` by the team's mean)."""
+        self._mass_input = (0.0, 0.0)
+        """This robot's ``(ι_i, ι_i m_i)``, the inputs of the team's mass."""
+        super().__init__(config, neighbours)
+        self.rotation = RotationConsensus(len(neighbours), config.n)
+        """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
+        self.lag = 0.0
+        """``τ_d`` (s), the drives' lag from Step 4's fit (Steps 5 and 7)."""
+        self.probe: ProbeFit | None = None
+        """Once done, the current probe's fits (:mod:`agent.algorithm.robust.load_change`)."""
+        self.probe_began = -1
+        """The first tick of :attr:`probe`'s probe."""
+
+    # ---------------------------------------------------------------- the drives' gains
+    @property
+    def moment(self) -> float | None:
+        """``Ĵ`` scaled by ``q / (w/n)``: the drives applied the torque ``±k n q`` where the fit
+        assumed ``±k w`` (:mod:`agent.algorithm.robust.team_mass`)."""
+        if self.inertia is None:
+            return None
+        moment = self.inertia.estimate
+        return moment * self._torque_gain if moment is not None else moment
+
+    @property
+    def _torque_gain(self) -> float:
+        """``q / (w/n)``: how much more torque the drives applied in Step 4 than commanded."""
+        spread = self.mean_square_offset
+        weighted = self.consensus["mean_gain_square_offset"]
+        return weighted / spread if spread > 0.0 and weighted > 0.0 else 1.0
+
+    def com_offset(self, alpha: float) -> Vec2 | None:
+        """``z_C`` corrected for the drives' gains. The torque of the push about the COM is
+        ``n (h + ḡ z_C) × f`` (:mod:`agent.algorithm.robust.team_mass`), so the fit (with the
+        corrected ``Ĵ``) finds ``c' = h + ḡ z_C``, and ``z_C = (c' − h) / ḡ``."""
+        z_c = super().com_offset(alpha)
+        if z_c is None:
+            return z_c
+        h, gain = self.consensus["mean_gain_offset"], self.consensus["mean_gain"]
+        return ((z_c[0] - h[0]) / gain, (z_c[1] - h[1]) / gain)
+
+    def applied(self, command: Vec2, measured: Vec2) -> None:
+        """This robot's drive gain, the input of the team's mean gain."""
+        self.drive.update(command, measured, self.dt)
+
+    @property
+    def mass(self) -> float | None:
+        """``m̂``: the team's information-weighted mean of the robots' fits
+        (:func:`~agent.algorithm.robust.team_mass.team_mass`), or this robot's own until that
+        is known."""
+        if self.mass_estimator is None:
+            return None
+        return self._robust_mass()[0]
+
+    def _robust_mass(self) -> tuple[float | None, float | None]:
+        """``(m̂, σ)``: the team's mass and its standard deviation, or this robot's own
+        (:meth:`_own_mass`) until the team's is known."""
+        own, std = self._own_mass()
+        c = self.consensus
+        team = (
+            None
+            if own is None
+            else team_mass(c["mean_mass_information"], c["mean_weighted_mass"], own)
+        )
+        return (own, std) if team is None else (team[0], team[0] * team[1])
+
+    def _own_mass(self) -> tuple[float | None, float | None]:
+        """This robot's mass fit scaled by the drives' mean gain ``ḡ``, and its standard
+        deviation (with that of ``ḡ``, every robot's gain taken as uncertain as this one's):
+        ``(None, None)`` before the fit."""
+        fit = self.mass_estimator
+        mass = None if fit is None else fit.estimate
+        if mass is None:
+            return (None, None)
+        gain = self.consensus["mean_gain"]
+        std = fit.std
+        if std is not None:
+            team_gain_std = (self.drive.std or 0.0) / math.sqrt(self.n)
+            std = math.hypot(std * gain, mass * gain * team_gain_std)
+        return (mass * gain, std)
+
+    # ---------------------------------------------------------------- hooks
+    def _new_edge(self) -> ArcRelativePosition:
+        return ArcRelativePosition(self.forgetting)
+
+    def _sample_edge(self, edge: Any, zdot: Vec2, dt: float) -> None:
+        edge.update(zdot, dt, follow=False)  # its direction follows the team's rotation
+
+    def _inputs(self, x: Vec2) -> Sequence[float]:
+        return inputs(x, self.drive.estimate, self._mass_input)
+
+    def _before_consensus(self) -> None:
+        self._mass_input = mass_input(*self._own_mass())  # the input of the team's (Step 7)
+
+    def _turn(
+        self, zdots: dict[int, Vec2], interval: float, inbox: Inbox, ref: int | None
+    ) -> float:
+        """The team's rotation since the last instant (:mod:`agent.algorithm.robust.rotation`):
+        this robot's own turn, from the edges sampled over the whole interval (else the last
+        ω times the interval), plus the consensus on the neighbours' levels; each such edge's
+        direction filter then follows it."""
+        fallback = (self.omega or 0.0) * interval
+        fresh = [
+            j
+            for j in zdots
+            if self.edges[j].moving and abs(self.edges[j].last_dt - interval) < 1e-9
+        ]
+        turns = []
+        for j in fresh:
+            edge, z = self.edges[j], zdots[j]
+            radius = edge.distance if edge.centre is not None else None
+            weight = turn_weight(
+                radius=radius, speed2=z[0] * z[0] + z[1] * z[1], noise=edge.noise, dt=interval
+            )
+            turns.append((edge.last_turn, weight))
+        own = own_turn(turns)
+        heard = (
+            (j, s.degree, s.instant, s.team.rotation, s.team.mean_turn_variance)
+            for j, s in inbox.latest.items()
+            if j in self.edges
+        )
+        turn, variance = (fallback, None) if own is None else own
+        rotation = self.rotation
+        turn = rotation.update(self.instant, turn, variance, heard, self._angle_at.get)
+        for j in zdots:
+            edge = self.edges[j]
+            if j in fresh:
+                edge.follow(turn, rotation.turn_variance)
+            else:
+                edge.follow(edge.last_turn)
+        return turn
+
+    def _excite_stds(self) -> tuple[float | None, float | None]:
+        """The least certain distance's, and the least certain ``z_ij``'s for ``z_i`` and
+        ``w / n`` (the consensus of the ``z_ij``)."""
+        edges = [self.edges[j] for j in self.neighbours]
+        return (max(e.distance_std for e in edges), max(e.std for e in edges))
+
+    def _std(self, estimator: Any) -> float | None:
+        return estimator.std
+
+    def _new_inertia(self) -> InertiaFit:
+        return InertiaFit(self.forgetting, self._torque_scale_std())
+
+    def _update_inertia(self, torque: float, span: float) -> None:
+        self.inertia.update(self.angle, torque, span)  # the rotation angle, not ω
+
+    def _new_com(self, schedule: ProbeSchedule) -> ComFit:
+        self.lag = self.inertia.lag  # the drives' lag, which Step 4's fit found
+        return ComFit(self.n, schedule.moment_used, schedule.push, self.forgetting, self.lag)
+
+    def _update_com(self, alpha: float, sign: float, span: float, added: Vec2) -> None:
+        self.com.update(alpha, sign, span, added=added)
+
+    def _new_mass(self, schedule: ProbeSchedule) -> MassFit:
+        return MassFit(self.n, schedule.push, self.forgetting, self.lag)
+
+    def _update_mass(
+        self, velocity: Vec2, offset: Vec2, sign: float, span: float, added: Vec2
+    ) -> None:
+        self.mass_estimator.update(velocity, offset, self.angle, sign, span, added=added)
+
+    def _forget_load(self) -> None:
+        super()._forget_load()
+        self.probe = None
+
+    def _torque_scale_std(self) -> float:
+        """The relative standard deviation of ``w = Σ‖z_i‖²``, which scales the torque Step 4
+        assumes (``±k w``) and so ``Ĵ``: ``2 σ_z / ‖z_i‖`` per robot, ``σ_z`` the mean of
+        this robot's edges' (the others' taken alike), averaged over ``n`` robots."""
+        stds = [edge.std for edge in self.edges.values() if edge.std is not None]
+        spread = self.mean_square_offset
+        size = math.sqrt(spread) if spread > 0.0 else 0.0
+        if not stds or size == 0.0:
+            return 0.0
+        return 2.0 * (sum(stds) / len(stds)) / size / math.sqrt(self.n)
+
+    # ---------------------------------------------------------------- once done: probes
+    def _once_pushed(self, e: int, prev: int, span: float, schedule: ProbeSchedule) -> None:
+        """Each probe's fit over the interval ``span`` from ``prev`` to ``e``, and at the probe's
+        last instant its test against the estimates (:mod:`agent.algorithm.robust.load_change`)."""
+        start = schedule.probe_start(e)
+        if start is None or self.mass_estimator is None or self.com_velocity is None:
+            return
+        if self.probe is not None and self.probe_began != start:
+            self.probe = None  # (its last instant was never measured)
+        if e == start:
+            mass = self.mass_estimator.estimate
+            if mass is None or mass <= 0.0:
+                return
+            self.probe = ProbeFit(self.n, mass, schedule.push, self.lag, self.angle)
+            self.probe_began = start
+            self.probe.update(self.com_velocity, self.omega, self.angle, 0.0, 0.0)
+            return
+        end = start + schedule.probe_ticks
+        if self.probe is None or prev < start or e > end:
+            return
+        sign = sum(schedule.probe_sign(t) for t in range(prev, e)) / (e - prev)
+        self.probe.update(self.com_velocity, self.omega, self.angle, sign, span)
+        if e < end:
+            return
+        probe, self.probe = self.probe, None
+        load = self._published_load()
+        if load is None:
+            return
+        scores = probe.score(*load)
+        if scores is not None:
+            self.change_score = max(scores)
+            threshold = self.tuning.robust.change_threshold
+            self.changed = self.changed or self.change_score > threshold
+
+    def _published_load(self) -> tuple[float, tuple[float, float, float]] | None:
+        """The published relative standard deviation of ``m̂`` and covariance of this robot's
+        ``contact_to_com``, now (``None`` if either is not known)."""
+        relative = {j: z for j in self.neighbours if (z := self.relative_position(j)) is not None}
+        z_c = self.com_offset(self.angle - self.push_angle)
+        mass = self.mass
+        if z_c is None or not mass:
+            return None
+        z_i = self.consensus.centroid
+        reported = self._reported(relative, (-(z_i[0] + z_c[0]), -(z_i[1] + z_c[1])))
+        mass_std, cov = reported["mass_std"], reported.get("contact_to_com_cov")
+        if mass_std is None or cov is None:
+            return None
+        return mass_std / mass, cov
+
+    # ---------------------------------------------------------------- reporting
+    def team_state(self):
+        """The consensus' states, with this robot's level of the load's rotation (sent modulo
+        ``2π``) and its state of the turns' mean variance."""
+        consensus = self.consensus
+        consensus.set("rotation", wrapped(self.angle))
+        consensus.set("mean_turn_variance", self.rotation.variance)
+        return consensus.state
+
+    def _reported(self, relative: dict[int, Vec2], contact_to_com: Vec2 | None) -> dict:
+        """The published standard deviations and covariances
+        (:func:`~agent.algorithm.robust.uncertainty.published`)."""
+        return published(self, relative, contact_to_com)
