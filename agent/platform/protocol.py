@@ -459,13 +459,6 @@ class DecodeError(ValueError):
 
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
-_SHARE = _struct.Struct(f"<Hq2dHqBQqHHH{_team.width(_team.TEAM_QUANTITIES)}dB")
-"""sender, tick, velocity, degree, instant; the barrier (phase, ready, switch_at,
-load_changes, rejoins); the team quantities' layout code (:func:`agent.platform.team.
-layout_code`) and their states, vectors' components in place; how many flows follow."""
-_FLOW = _struct.Struct(f"<H{_team.flow_width()}d")
-"""A flow: the neighbour, then the outflows of the flow-form quantities, in declaration order."""
-_TEAM_LAYOUT = _team.layout_code()
 _CLOCK = _struct.Struct("<qd")
 _ESTIMATES = _struct.Struct("<HqBqHBBBBHH")
 """robot, tick, phase, phase_since, which optional values follow (bit per
@@ -534,23 +527,7 @@ def encode(message: object) -> bytes:
     if kind == 2:
         return head + _COMMAND.pack(m.robot, m.tick, *m.force)
     if kind == 3:
-        b = m.barrier
-        fixed = _SHARE.pack(
-            m.sender,
-            m.tick,
-            *m.velocity,
-            m.degree,
-            m.instant,
-            b.phase,
-            b.ready,
-            b.switch_at,
-            b.load_changes,
-            b.rejoins,
-            _TEAM_LAYOUT,
-            *_team.flatten(m.team, _team.TEAM_QUANTITIES),
-            len(m.flows),
-        )
-        return head + fixed + b"".join(_FLOW.pack(*f) for f in m.flows)
+        return head + SHARE_WIRE.pack(m)
     if kind == 4:
         return head + _CLOCK.pack(m.tick, m.time_s)
     if kind == 5:
@@ -667,26 +644,6 @@ def _decode_estimates(body: memoryview) -> Estimates:
     )
 
 
-def _decode_share(body: memoryview) -> Share:
-    values = _unpack(_SHARE, body[: _SHARE.size], "share")
-    sender, tick, vx, vy, degree, instant, phase, ready, switch_at, changes, rejoins = values[:11]
-    layout, count = values[11], values[-1]
-    if layout != _TEAM_LAYOUT:
-        raise DecodeError(
-            f"share: team quantities of layout 0x{layout:04x}, this program's 0x{_TEAM_LAYOUT:04x}"
-        )
-    rest = body[_SHARE.size :]
-    if len(rest) != count * _FLOW.size:
-        raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * _FLOW.size}")
-    flows = tuple(
-        _unpack(_FLOW, rest[i : i + _FLOW.size], "share flow")
-        for i in range(0, len(rest), _FLOW.size)
-    )
-    barrier = Barrier(_phase(phase, "share"), ready, switch_at, changes, rejoins)
-    team = TeamState(*_team.grouped(values[12:-1], _team.TEAM_QUANTITIES))
-    return Share(sender, tick, (vx, vy), degree, instant, barrier, team, flows)
-
-
 def _check_header(payload: bytes, expected: int) -> memoryview:
     if len(payload) < _HEADER.size:
         raise DecodeError(f"payload of {len(payload)} bytes is shorter than the header")
@@ -782,32 +739,6 @@ def _command(m: Command) -> None:
     _bounded("command.force", m.force, MAX_FORCE)
 
 
-def _share(m: Share) -> None:
-    _robot_id("share.sender", m.sender)
-    _within("share.tick", m.tick, 0, MAX_TICK)
-    _bounded("share.velocity", m.velocity, MAX_SPEED)
-    _within("share.degree", m.degree, 1, MAX_ROBOT_ID)
-    _within("share.instant", m.instant, -1, m.tick - 1)
-    b = m.barrier
-    _within("share.barrier.switch_at", b.switch_at, -1, MAX_TICK)
-    _within("share.barrier.load_changes", b.load_changes, 0, MAX_LOAD_CHANGES)
-    _within("share.barrier.rejoins", b.rejoins, 0, MAX_REJOINS)
-    outside = _team.check_state(m.team, _team.TEAM_QUANTITIES, "share.team")
-    if outside is not None:
-        raise DecodeError(outside)
-    _within("share.flows (how many)", len(m.flows), 0, m.degree)
-    for flow in m.flows:
-        if len(flow) != _FLOW_FIELDS:
-            raise DecodeError(f"share.flows: expected {_FLOW_FIELDS} numbers a flow, got {flow!r}")
-        _robot_id("share.flows.robot", flow[0])
-        for f in flow[1:]:
-            _within("share.flows", f, -MAX_FLOW, MAX_FLOW)
-
-
-_FLOW_FIELDS = 1 + _team.flow_width()
-"""A flow's numbers: the neighbour, then the outflows."""
-
-
 def _clock(m: Clock) -> None:
     _within("clock.tick", m.tick, 0, MAX_TICK)
     _within("clock.time_s", m.time_s, 0.0, MAX_TIME_S)
@@ -899,10 +830,107 @@ def _control(m: Control) -> None:
         raise DecodeError(f"control.command {m.command!r} is not one of {CONTROL_COMMANDS}")
 
 
+class ShareWire:
+    """:class:`Share`'s wire layout and domain checks, derived from the team quantities'
+    declarations (:mod:`agent.platform.team`): one number per component of each quantity's state
+    and of each flow. The fixed part: sender, tick, velocity, degree, instant; the barrier
+    (phase, ready, switch_at, load_changes, rejoins); the quantities' layout code
+    (:func:`~agent.platform.team.layout_code`) and states; how many flows follow, each the
+    neighbour's id and the flow-form quantities' outflows, in declaration order."""
+
+    def __init__(
+        self, quantities: tuple[_team.TeamQuantity, ...] = _team.TEAM_QUANTITIES, state_type=None
+    ):
+        self.quantities = tuple(quantities)
+        self.state_type = state_type or _team.team_state_type(self.quantities)
+        self.fixed = _struct.Struct(f"<Hq2dHqBQqHHH{_team.width(self.quantities)}dB")
+        self.flow = _struct.Struct(f"<H{_team.flow_width(self.quantities)}d")
+        self.flow_fields = 1 + _team.flow_width(self.quantities)
+        """A flow's numbers: the neighbour, then the outflows."""
+        self.layout = _team.layout_code(self.quantities)
+
+    def pack(self, m: Share) -> bytes:
+        """The body of ``m`` (after the header)."""
+        b = m.barrier
+        fixed = self.fixed.pack(
+            m.sender,
+            m.tick,
+            *m.velocity,
+            m.degree,
+            m.instant,
+            b.phase,
+            b.ready,
+            b.switch_at,
+            b.load_changes,
+            b.rejoins,
+            self.layout,
+            *_team.flatten(m.team, self.quantities),
+            len(m.flows),
+        )
+        return fixed + b"".join(self.flow.pack(*f) for f in m.flows)
+
+    def unpack(self, body: memoryview | bytes) -> Share:
+        """The share of ``body``; :class:`DecodeError` unless it is one of this layout."""
+        body = memoryview(body)
+        fixed, flow = self.fixed, self.flow
+        values = _unpack(fixed, body[: fixed.size], "share")
+        sender, tick, vx, vy, degree, instant, phase, ready, switch_at, changes, rejoins = values[
+            :11
+        ]
+        layout, count = values[11], values[-1]
+        if layout != self.layout:
+            raise DecodeError(
+                f"share: team quantities of layout 0x{layout:04x}, this program's"
+                f" 0x{self.layout:04x}"
+            )
+        rest = body[fixed.size :]
+        if len(rest) != count * flow.size:
+            raise DecodeError(f"share: {len(rest)} bytes of flows, expected {count * flow.size}")
+        flows = tuple(
+            _unpack(flow, rest[i : i + flow.size], "share flow")
+            for i in range(0, len(rest), flow.size)
+        )
+        barrier = Barrier(_phase(phase, "share"), ready, switch_at, changes, rejoins)
+        team = self.state_type(*_team.grouped(values[12:-1], self.quantities))
+        return Share(sender, tick, (vx, vy), degree, instant, barrier, team, flows)
+
+    def check(self, m: Share) -> None:
+        """:class:`DecodeError` naming the field unless every field is within its domain."""
+        _robot_id("share.sender", m.sender)
+        _within("share.tick", m.tick, 0, MAX_TICK)
+        _bounded("share.velocity", m.velocity, MAX_SPEED)
+        _within("share.degree", m.degree, 1, MAX_ROBOT_ID)
+        _within("share.instant", m.instant, -1, m.tick - 1)
+        b = m.barrier
+        _within("share.barrier.switch_at", b.switch_at, -1, MAX_TICK)
+        _within("share.barrier.load_changes", b.load_changes, 0, MAX_LOAD_CHANGES)
+        _within("share.barrier.rejoins", b.rejoins, 0, MAX_REJOINS)
+        if len(m.team) != len(self.quantities):
+            raise DecodeError(
+                f"share.team: {len(m.team)} quantities, expected {len(self.quantities)}"
+            )
+        outside = _team.check_state(m.team, self.quantities, "share.team")
+        if outside is not None:
+            raise DecodeError(outside)
+        _within("share.flows (how many)", len(m.flows), 0, m.degree)
+        for flow in m.flows:
+            if len(flow) != self.flow_fields:
+                raise DecodeError(
+                    f"share.flows: expected {self.flow_fields} numbers a flow, got {flow!r}"
+                )
+            _robot_id("share.flows.robot", flow[0])
+            for f in flow[1:]:
+                _within("share.flows", f, -MAX_FLOW, MAX_FLOW)
+
+
+SHARE_WIRE = ShareWire(_team.TEAM_QUANTITIES, TeamState)
+"""The wire of :class:`Share` for the team's quantities."""
+
+
 DOMAINS = {
     Measurement: _measurement,
     Command: _command,
-    Share: _share,
+    Share: lambda m: SHARE_WIRE.check(m),
     Clock: _clock,
     Estimates: _estimates,
     Status: _status,
@@ -941,7 +969,7 @@ def _decode(kind: type, payload: bytes):
         r, t, fx, fy = _unpack(_COMMAND, body, "command")
         return Command(r, t, (fx, fy))
     if kind is Share:
-        return _decode_share(body)
+        return SHARE_WIRE.unpack(body)
     if kind is Clock:
         return Clock(*_unpack(_CLOCK, body, "clock"))
     if kind is Estimates:
