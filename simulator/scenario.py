@@ -51,6 +51,7 @@ from agent.platform.config import (
     check_bounds,
     from_table,
     toml_fields,
+    toml_tables,
     toml_value,
 )
 from agent.platform.geometry import Vec2
@@ -838,10 +839,7 @@ def scenario_to_toml(s: Scenario) -> str:
     agent = toml_fields(s.agent, only_changed=True)
     if agent:
         lines += ["", "[agent]", *agent]
-    for family in ("paper", "robust"):
-        table = toml_fields(getattr(s.agent, family), only_changed=True)
-        if table:
-            lines += ["", f"[agent.{family}]", *table]
+    lines += toml_tables(s.agent, "agent.", only_changed=True)
     for event in s.events:
         lines += ["", "[[events]]", f"at_s = {event.at_s!r}"]
         lines += [

@@ -516,10 +516,21 @@ def toml_fields(obj: Any, only_changed: bool = False) -> list[str]:
 
 def to_toml(obj: Any, comment: str = "") -> str:
     """TOML text that :func:`from_table` reads back to ``obj``: its plain fields, then one
-    table per dataclass field."""
+    table per dataclass field (``[a]``, then ``[a.b]`` for one nested in it, and so on)."""
     lines = [f"# {line}" for line in comment.splitlines()] + toml_fields(obj)
+    lines += toml_tables(obj)
+    return "\n".join(lines) + "\n"
+
+
+def toml_tables(obj: Any, prefix: str = "", only_changed: bool = False) -> list[str]:
+    """The tables of ``obj``'s dataclass fields, depth first, named ``prefix`` + the field
+    (``only_changed``: the fields that differ from the defaults, tables with none left out)."""
+    lines: list[str] = []
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(value):
-            lines += ["", f"[{f.name}]", *toml_fields(value)]
-    return "\n".join(lines) + "\n"
+            fields = toml_fields(value, only_changed)
+            if fields or not only_changed:
+                lines += ["", f"[{prefix}{f.name}]", *fields]
+            lines += toml_tables(value, f"{prefix}{f.name}.", only_changed)
+    return lines
