@@ -322,7 +322,8 @@ def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(ri
     frames), in bursts of 100 as fast as this process sends them, between the driver's
     ticks: the bridge reads every frame, counts every refused one, misses no tick, and
     answers ticks all along. (100 000 such frames, counted reason by reason, are in
-    tests/test_bridge.py, on a virtual bus: User-Mode Linux took 11.7 s for these 2 000.)"""
+    tests/unit/bridge/test_bridge.py, on a virtual bus: User-Mode Linux took 11.7 s for these
+    2 000.)"""
     junk, _ = random_frames(2_000, seed=9, codec=CODEC)
     errors = sum(1 for m in junk if m.is_error_frame)
     bus_off = sum(1 for m in junk if m.is_error_frame and m.arbitration_id & CAN_ERR_BUSOFF)

@@ -1,7 +1,7 @@
-"""The paper's team across network hosts (namespaces, see tests/multihost.py), every link over
-mutual TLS through a router that enforces the team's access control: a run converges, a robot
-whose link is cut for 3 s and a robot whose agent is killed and restarted both rejoin, and the
-team still ends within the estimator's bounds. ``make multihost`` runs these (root needed);
+"""The paper's team across network hosts (namespaces, see tests/multihost/hosts.py), every link
+over mutual TLS through a router that enforces the team's access control: a run converges, a
+robot whose link is cut for 3 s and a robot whose agent is killed and restarted both rejoin, and
+the team still ends within the estimator's bounds. ``make multihost`` runs these (root needed);
 they print the figures they measure."""
 
 from __future__ import annotations

@@ -7,8 +7,6 @@ from __future__ import annotations
 import contextlib
 import io
 import json
-import subprocess
-import sys
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -17,7 +15,7 @@ from typing import Any
 import pytest
 
 from agent.platform.dispatch import GROUP, main
-from tests.helpers.paths import PAPER, ROOT
+from tests.helpers.paths import PAPER
 
 PLOTS = ("relative_positions.png", "inertia_mass.png", "com_observer.png")
 BOUNDS = {
@@ -156,18 +154,6 @@ def test_no_command_prints_the_help_and_exits_two(capsys: pytest.CaptureFixture[
     assert main([]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.startswith("usage: heft") and "commands:" in err
-
-
-def test_python_dash_m_agent_is_heft() -> None:
-    ran = subprocess.run(
-        [sys.executable, "-m", "agent", "--version"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert ran.returncode == 0, ran.stderr
-    assert ran.stdout.strip() == f"heft {metadata.version('heft-hil')}"
 
 
 def test_a_package_whose_commands_cannot_be_imported_is_left_out(

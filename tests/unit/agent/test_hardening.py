@@ -5,7 +5,9 @@ estimates.
 
 The agents, the plant and the collector run here with their real Zenoh ports and transports,
 on an in-process bus that stands in for a Zenoh session (the same callbacks, keys and
-liveliness tokens), so every byte goes through the code that decodes it on robots."""
+liveliness tokens), so every byte goes through the code that decodes it on robots. A run over
+real Zenoh with a forger on its router is in
+tests/integration/test_forged_messages_over_zenoh.py."""
 
 from __future__ import annotations
 
@@ -28,12 +30,9 @@ from agent.platform.protocol import (
     Command,
     Control,
     DecodeError,
-    Estimates,
-    Keys,
     Measurement,
     Phase,
     Share,
-    Status,
     encode,
 )
 from agent.platform.zenoh_robot_io import ZenohAgentsPort
@@ -42,6 +41,7 @@ from simulator.launcher import Collector
 from simulator.node import PlantNode
 from simulator.scenario import Scenario, load_scenario
 from tests.helpers.fakes import FakeFifo
+from tests.helpers.forged import KEYS, TEAM, forged_messages
 from tests.helpers.paths import PAPER
 
 _LOG = logging.getLogger("test.hardening")
@@ -150,50 +150,6 @@ class _Liveliness:
         return _Declared(lambda: self.bus.watchers.remove(entry))
 
 
-# ----------------------------------------------------------------------------- adversaries
-TEAM = "fuzz"
-KEYS = Keys(TEAM)
-
-
-def _forged(rng: random.Random, n: int, tick: int) -> list[tuple[str, bytes]]:
-    """One adversarial but well-encoded message for each kind of key of a team of ``n``:
-    values out of their domains, robots out of the team or on another robot's key, ticks far
-    from the receiver's clock. Every one must be rejected."""
-    i = rng.randint(1, n)
-    other = i % n + 1
-    far = tick + rng.randint(1000, 2**40 - tick)
-    huge = rng.choice([1e6, -1e9, 3e300])
-    out = [
-        (KEYS.velocity(i), encode(Measurement(i, 2**62, 0.0, (0.0, 0.0), (0.0, 0.0)))),
-        (KEYS.velocity(i), encode(Measurement(other, tick, 0.0, (0.1, 0.0), (0.0, 0.0)))),
-        (KEYS.velocity(i), encode(Measurement(i, far, 0.0, (0.0, 0.0), (0.0, 0.0)))),
-        (KEYS.velocity(i), encode(Measurement(i, tick, 0.0, (huge, 0.0), (0.0, 0.0)))),
-        (KEYS.force(i), encode(Command(i, 2**62, (10.0, 0.0)))),
-        (KEYS.force(i), encode(Command(i, far, (10.0, 0.0)))),
-        (KEYS.force(i), encode(Command(other, tick, (10.0, 0.0)))),
-        (KEYS.force(i), encode(Command(i, tick, (huge, 0.0)))),
-        (KEYS.share(i), _share_with_phase(Share(i, tick + 20, (0.0, 0.0), 1), 200)),
-        (KEYS.share(i), encode(Share(i, tick, (huge, 0.0), 1))),
-        (KEYS.share(i), encode(Share(i, tick, (0.0, 0.0), 0))),
-        (KEYS.share(i), encode(Share(i, tick, (0.0, 0.0), 1, instant=tick))),
-        (KEYS.share(i), encode(Share(n + 1 + rng.randint(0, 9), tick, (0.0, 0.0), 1))),
-        (KEYS.control(), encode(Control("launch"))),
-        (KEYS.estimate(i), encode(Estimates(n + 5, tick, Phase.DONE))),
-        (KEYS.estimate(i), encode(Estimates(i, far, Phase.DONE))),
-        (KEYS.status(i), encode(Status(0, tick, Phase.HALTED))),
-        (KEYS.truth(), encode(Control())),
-    ]
-    return out
-
-
-def _share_with_phase(share: Share, phase: int) -> bytes:
-    payload = bytearray(encode(share))
-    at = 3 + struct.calcsize("<Hq2dHB2ddd2dd")  # the phase byte
-    assert payload[at] == share.phase  # (fails if the layout moves it)
-    payload[at] = phase
-    return bytes(payload)
-
-
 def _rejections(nodes, plant, collector) -> int:
     total = plant.port.rejects.total + collector.rejects.total
     seen = set()
@@ -284,7 +240,7 @@ def test_ten_thousand_forged_messages_change_nothing(clean) -> None:
         nonlocal sent
         while sent < 10_000:
             tick = team.plant.plant.tick
-            for key, payload in _forged(rng, team.scenario.n, tick):
+            for key, payload in forged_messages(rng, team.scenario.n, tick):
                 team.bus.put(key, payload)
                 sent += 1
             time.sleep(0.001)
@@ -369,57 +325,6 @@ def test_every_adversarial_message_is_counted_and_nothing_raises(messages) -> No
         # On a key of another kind the payload is undecodable; on its own, out of its domain.
         assert _rejections([node], plant, collector) == sent
         assert node.next_tick == 0 and plant.commands == {}
-
-
-# ----------------------------------------------------------------------------- over Zenoh
-@pytest.mark.slow
-def test_a_realtime_run_over_zenoh_shrugs_off_forged_messages(monkeypatch) -> None:
-    """A second Zenoh client on the run's router forges messages on every key of the team —
-    thousands on each, as in the probes that once crashed every agent — while the paper's
-    scenario runs in real time: the run converges within the usual bounds."""
-    import io
-    import os
-
-    from agent.platform.zenoh_session import ZenohSettings, open_session
-    from simulator import launcher
-    from tests.helpers.accuracy import assert_within
-
-    port = launcher.free_port()
-    monkeypatch.setattr(launcher, "free_port", lambda: port)
-    scenario = load_scenario(PAPER)
-    keys = Keys(launcher._team_name(scenario))
-    assert keys.team.endswith(str(os.getpid()))
-    stop = threading.Event()
-    sent = defaultdict(int)
-
-    def forge() -> None:
-        settings = ZenohSettings(mode="client", connect=(f"tcp/127.0.0.1:{port}",))
-        rng = random.Random(3)
-        with open_session(settings) as session:
-            publishers = {}
-            while not stop.is_set():
-                for key, payload in _forged(rng, scenario.n, 0):
-                    key = key.replace(KEYS.root, keys.root)
-                    if key not in publishers:
-                        publishers[key] = session.declare_publisher(key)
-                    publishers[key].put(payload)
-                    sent[key.rsplit("/", 2)[-1]] += 1
-                time.sleep(0.002)
-
-    forger = threading.Thread(target=forge, daemon=True)
-    forger.start()
-    try:
-        outcome = launcher.run_zenoh(scenario, clock="realtime", log_stream=io.StringIO())
-    finally:
-        stop.set()
-        forger.join(timeout=10)
-    assert_within(outcome, rel=0.005, metres=0.005)
-    print("forged messages by key:", dict(sent))
-    assert min(sent.values()) >= 2000, dict(sent)
-    # The rejections reach the results: the launcher's by kind, and each agent's.
-    rejections = outcome.transport["rejections"]
-    assert rejections["launcher"]["Estimates"] > 0 and rejections["launcher"]["Truth"] > 0
-    assert all(r["decode_errors"] > 0 for r in rejections["robots"].values()), rejections
 
 
 # ----------------------------------------------------------------------------- the clocks

@@ -2,33 +2,27 @@
 
 Values that once gave tracebacks or hangs (a memory of 1e-300 s, a window of 1e300 s, 1e12
 physics steps a second, a sensor at 1e-9 Hz, a start timeout of NaN, a team of 200, a port of
-99999) get exit status 2 and one ``heft: error:`` line naming the key and its range; a busy
-port or no router gets one line too, with exit status 4 (worth retrying). Every declared range
-(:func:`agent.platform.config.bounded`) is tested at both ends: a value just inside is accepted, one
-just outside refused with the key named; and the README's "Limits" section lists each of them.
-"""
+99999) get exit status 2 and one ``heft: error:`` line naming the key and its range. Every
+declared range (:func:`agent.platform.config.bounded`) is tested at both ends: a value just
+inside is accepted, one just outside refused with the key named; and the README's "Limits"
+section lists each of them. A busy port or no router (exit status 4) is in
+tests/integration/test_endpoint_errors.py; the probes as ``heft`` processes in
+tests/integration/test_heft_processes.py."""
 
 from __future__ import annotations
 
-import copy
 import math
 import re
-import socket
-import subprocess
-import sys
-import tomllib
 import typing
-from pathlib import Path
 from typing import Any
 
 import pytest
 
 from agent.algorithm.tuning import AgentTuning
 from agent.node import AgentNodeConfig, load_agent_config
-from agent.platform.children import free_port
-from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds, toml_value
+from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds
 from agent.platform.dispatch import main
-from agent.platform.zenoh_session import SessionError, ZenohSettings, open_session
+from agent.platform.zenoh_session import ZenohSettings
 from simulator.scenario import (
     MAX_COORDINATE,
     MAX_POSITION,
@@ -42,72 +36,12 @@ from simulator.scenario import (
     load_scenario,
     polygon_diameter,
 )
+from tests.helpers.bad_input import paper, refused, robot_file, scenario_file
 from tests.helpers.paths import PAPER, ROOT
 from tests.helpers.tls import loadable_copy
 
 RANGE = re.compile(r"[\[(][^,\]]+, [^\]]+\]")
 """A range as the messages write it: ``[10, 1000]``, ``(0, 3600]``, ``[1 tick, 60]``."""
-
-
-# ------------------------------------------------------------------------------ helpers
-def paper() -> dict[str, Any]:
-    return tomllib.loads(PAPER.read_text(encoding="utf-8"))
-
-
-def _set(data: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
-    """``data`` with ``{"table.key": value}`` set (``None`` removes the key)."""
-    data = copy.deepcopy(data)
-    for dotted, value in values.items():
-        *tables, key = dotted.split(".")
-        table = data
-        for name in tables:
-            table = table.setdefault(name, {})
-        if value is None:
-            table.pop(key, None)
-        else:
-            table[key] = value
-    return data
-
-
-def write_toml(path: Path, data: dict[str, Any]) -> Path:
-    lines = [f"{k} = {toml_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    for name, table in data.items():
-        if isinstance(table, dict):
-            lines += ["", f"[{name}]"]
-            lines += [f"{k} = {toml_value(v)}" for k, v in table.items() if not isinstance(v, dict)]
-            for sub, inner in table.items():
-                if isinstance(inner, dict):
-                    lines += ["", f"[{name}.{sub}]"]
-                    lines += [f"{k} = {toml_value(v)}" for k, v in inner.items()]
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path
-
-
-def scenario_file(tmp_path: Path, values: dict[str, Any], base: dict | None = None) -> Path:
-    return write_toml(tmp_path / "s.toml", _set(paper() if base is None else base, values))
-
-
-ROBOT = {"robot": 1, "n": 2, "neighbours": [2]}
-
-
-def robot_file(tmp_path: Path, values: dict[str, Any]) -> Path:
-    return write_toml(tmp_path / "robot.toml", _set(ROBOT, values))
-
-
-def one_error_line(capsys, *words: str) -> str:
-    """The one ``heft: error:`` line on stderr, which names each of ``words``."""
-    err = capsys.readouterr().err.strip()
-    assert "Traceback" not in err, err
-    lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("heft: error: "), err
-    for word in words:
-        assert word in lines[0], (word, lines[0])
-    return lines[0]
-
-
-def refused(capsys, argv: list[str], *words: str, status: int = 2) -> str:
-    assert main(argv) == status
-    return one_error_line(capsys, *words)
 
 
 # ------------------------------------------------------------------------------ the probes
@@ -180,14 +114,6 @@ def test_the_plants_start_timeout_is_a_finite_number_of_seconds(capsys, value) -
     refused(capsys, ["sim", str(PAPER), f"--start-timeout={value}"], "--start-timeout", "(0, 3600]")
 
 
-@pytest.mark.parametrize("value", ["0.001", "3600"])
-def test_a_start_timeout_in_range_is_accepted(capsys, value) -> None:
-    """It gets as far as the router (none there, and no waiting for one)."""
-    port = free_port()
-    argv = ["sim", str(PAPER), f"--start-timeout={value}", f"--connect=tcp/127.0.0.1:{port}"]
-    refused(capsys, [*argv, "--connect-timeout-ms=0"], f"connect tcp/127.0.0.1:{port}", status=4)
-
-
 @pytest.mark.parametrize("value", ["-1", "600001"])
 def test_the_plants_connect_timeout_is_bounded(capsys, value) -> None:
     argv = ["sim", str(PAPER), f"--connect-timeout-ms={value}"]
@@ -236,68 +162,6 @@ def test_the_largest_seed_generates_a_scenario(tmp_path, capsys) -> None:
 @pytest.mark.parametrize("port", [0, 65536, 99999])
 def test_a_port_outside_1_to_65535_is_refused(capsys, port) -> None:
     refused(capsys, ["router", "--listen", f"tcp/127.0.0.1:{port}"], "--listen", "65535")
-
-
-def test_a_busy_port_is_one_line(capsys) -> None:
-    with socket.socket() as busy:
-        busy.bind(("127.0.0.1", 0))
-        busy.listen()
-        port = busy.getsockname()[1]
-        argv = ["router", "--listen", f"tcp/127.0.0.1:{port}"]
-        refused(capsys, argv, f"listen tcp/127.0.0.1:{port}: address already in use", status=4)
-
-
-def test_no_router_to_connect_to_is_one_line(tmp_path, capsys) -> None:
-    port = free_port()  # nothing listens there
-    path = robot_file(
-        tmp_path,
-        {"zenoh.connect": [f"tcp/127.0.0.1:{port}"], "zenoh.connect_timeout_ms": 300},
-    )
-    refused(
-        capsys,
-        ["agent", "--config", str(path)],
-        f"connect tcp/127.0.0.1:{port}: no answer within 300 ms (connect_timeout_ms)",
-        status=4,
-    )
-
-
-def test_the_plant_without_a_router_is_one_line(capsys) -> None:
-    port = free_port()
-    argv = ["sim", str(PAPER), f"--connect=tcp/127.0.0.1:{port}", "--connect-timeout-ms=300"]
-    refused(capsys, argv, f"connect tcp/127.0.0.1:{port}: no answer within 300 ms", status=4)
-
-
-def test_open_session_says_which_endpoint_failed() -> None:
-    port = free_port()
-    router = ZenohSettings(mode="router", connect=(), listen=(f"tcp/127.0.0.1:{port}",))
-    with open_session(router):
-        with pytest.raises(SessionError, match=f"^listen tcp/127.0.0.1:{port}: address already"):
-            open_session(router)
-
-
-def test_an_address_not_on_this_machine_is_one_line(capsys) -> None:
-    # TEST-NET-1 (RFC 5737): never assigned to this machine's interfaces
-    argv = ["router", "--listen", "tcp/192.0.2.1:7447", "--allow-plain"]
-    refused(capsys, argv, "listen tcp/192.0.2.1:7447", status=4)
-
-
-@pytest.mark.parametrize("probe", ["start timeout nan", "port 99999", "memory of 1e-300 s"])
-def test_as_a_process_exit_2_one_line_no_hang(tmp_path, probe) -> None:
-    """The probes as a user ran them: a ``heft`` process, which ends at once."""
-    argv = {
-        "start timeout nan": ["sim", str(PAPER), "--start-timeout", "nan"],
-        "port 99999": ["router", "--listen", "tcp/127.0.0.1:99999"],
-        "memory of 1e-300 s": [
-            "run",
-            str(scenario_file(tmp_path, {"agent.regression_memory_s": 1e-300})),
-        ],
-    }[probe]
-    done = subprocess.run(
-        [sys.executable, "-m", "agent", *argv], capture_output=True, text=True, timeout=60
-    )
-    assert done.returncode == 2, done
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("heft: error: "), done.stderr
 
 
 # ------------------------------------------------------------------------------ every range

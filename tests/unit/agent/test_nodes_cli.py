@@ -1,12 +1,12 @@
 """What is deployed on robots (deploy/), how an agent's ``robot.toml`` is checked, and the
-process subcommands' bad input and help: all without a Zenoh network.
+process subcommands' bad input and help: all in one process, without a Zenoh network.
 
 - deploy/paper/robot-<i>.toml load, agree with each other and with the paper's scenario, and are
   what the launcher would write for the team "paper" on the wall clock;
 - ``load_agent_config`` turns every mistake into a one-line :class:`ConfigError` naming the file
   and the key;
 - deploy/zenoh/router.json5 is the router ``heft router`` runs, secured (TLS only, no multicast;
-  its access control is tested in tests/test_security.py);
+  its access control is tested in tests/integration/test_secured_network.py);
 - ``heft agent|sim|router|run`` exit 2 with one ``heft: error:`` line on bad input, and
   ``--help`` describes each command;
 - the Zenoh options every process command shares (``--connect``, ``--listen``,
@@ -19,10 +19,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import re
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -649,20 +646,3 @@ def test_a_robot_toml_can_name_a_zenoh_config_file(tmp_path: Path) -> None:
     path.write_text(JSON5, encoding="utf-8")
     config = load_config_text(toml_text(BASE, zenoh={"config_file": str(path)}))
     assert config.zenoh.config_file == str(path)
-
-
-def test_a_bridge_config_is_refused_in_one_line_before_the_bus(tmp_path: Path) -> None:
-    """``heft bridge`` as a process, with an empty CAN channel: exit 2 and one line on stderr
-    that names the key, before any bus is opened (so no vcan is needed)."""
-    path = tmp_path / "robot.toml"
-    path.write_text('robot = 1\nn = 2\nneighbours = [2]\n[can]\nchannel = ""\n', "utf-8")
-    done = subprocess.run(
-        [sys.executable, "-m", "agent", "bridge", "--config", str(path)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-    )
-    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
-    assert "can.channel" in done.stderr

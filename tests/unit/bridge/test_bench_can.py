@@ -1,10 +1,9 @@
 """``heft bench --can``: its pure parts (percentiles, the rate search, ticks carried in frame
-values, the report), its command line, and one short benchmark of a real bridge on vcan
-(marked ``hil``: ``heft vcan -- pytest -m hil tests/test_bench_can.py``)."""
+values, the report) and its command line. The short benchmark of a real bridge on vcan is in
+tests/hil/test_bench_can_on_vcan.py."""
 
 from __future__ import annotations
 
-import math
 import os
 import random
 import statistics
@@ -14,7 +13,6 @@ import pytest
 
 from agent.platform.dispatch import main
 from agent.platform.protocol import Command, Measurement
-from bridge.bench import can as benchmark
 from bridge.bench.can import (
     FORCE_STEP,
     TICK_BASE,
@@ -26,7 +24,6 @@ from bridge.bench.can import (
     RoundTrips,
     format_can_report,
     percentile,
-    run_can_benchmark,
     tick_of,
     tick_values,
     vcan_problem,
@@ -223,35 +220,3 @@ def test_bench_can_refuses_bad_options_in_one_line(argv, message, capsys) -> Non
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err, err
-
-
-# ------------------------------------------------------------------------------ on vcan
-@pytest.mark.hil
-@pytest.mark.usefixtures("vcan")
-def test_a_short_benchmark_of_a_bridge_on_vcan() -> None:
-    """A few seconds at a slow period: every round trip measured, none lost, by kernel
-    timestamps; the bridge's CPU share a real percentage; a clean forwarding rate."""
-    settings = CanBenchSettings(
-        seconds=3.0,
-        period_s=0.05,
-        step_seconds=1.0,
-        min_step_ticks=20,
-        start_rate=20.0,
-        max_rate=40.0,
-        refine=0,
-    )
-    report = run_can_benchmark(settings, say=print)
-    print(format_can_report(report))
-    trips = report.round_trips
-    assert trips.sent == 60
-    assert trips.count == trips.sent and trips.lost == 0 and trips.unmatched == 0
-    p50, p99 = trips.p(50), trips.p(99)
-    assert p50 is not None and p99 is not None
-    assert 0 < p50 <= p99 <= trips.p(100) < math.inf  # figures, not goals: see heft bench
-    assert trips.bridge_cpu_percent is not None and 0 < trips.bridge_cpu_percent < 100
-    assert [s.asked for s in report.steps] == [20.0, 40.0]
-    fastest = report.fastest_clean
-    assert fastest is not None and fastest.answered == fastest.ticks >= 20
-    assert fastest.frames_read == fastest.frames_sent >= 3 * fastest.ticks
-    if os.environ.get("HEFT_VCAN") == "1":  # inside heft vcan's guest
-        assert report.where == benchmark.where_measured() == "in User-Mode Linux"

@@ -1,6 +1,6 @@
 """The AGV bridge without a kernel bus: its logic (frames → measurements, commands → frames,
 sequence counters, the watchdog), its tick sources, its config, and the bridge's loop on
-python-can's ``virtual`` bus. The same bridge on real vcan is in tests/test_hil.py."""
+python-can's ``virtual`` bus. The same bridge on real vcan is in tests/hil/test_hil.py."""
 
 from __future__ import annotations
 

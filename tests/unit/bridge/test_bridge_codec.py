@@ -1,13 +1,11 @@
 """The AGV CAN protocol on its own: ``bridge/agv.dbc`` is the file ``bridge/dbc.py`` declares,
 every frame kind round-trips through :class:`bridge.codec.AgvCodec` at the DBC's resolution,
-the signals sit where the DBC says, and every reject reason is produced by a crafted frame."""
+the signals sit where the DBC says, and every reject reason is produced by a crafted frame.
+(cantools' own command reading the DBC: tests/integration/test_dbc_with_cantools.py.)"""
 
 from __future__ import annotations
 
 import math
-import re
-import subprocess
-import sys
 
 import can
 import pytest
@@ -35,7 +33,6 @@ from bridge.dbc import (
     FORCE_RESOLUTION,
     HEARTBEAT_BASE,
     MAX_FORCE,
-    MAX_NODE,
     MAX_SPEED,
     ODOMETRY_BASE,
     SPEED_RESOLUTION,
@@ -84,22 +81,6 @@ def test_the_committed_dbc_is_what_dbc_py_builds() -> None:
     assert DBC_PATH.read_bytes().decode("ascii") == build().as_dbc_string(), (
         "bridge/agv.dbc is out of date: run python -m bridge.dbc"
     )
-
-
-def test_cantools_dump_reads_the_dbc_and_lists_every_frame() -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "cantools", "dump", str(DBC_PATH)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert done.returncode == 0, done.stderr
-    names = re.findall(r"^\s*Name:\s+(\S+)\s*$", done.stdout, flags=re.MULTILINE)
-    for name in ("Sync", "Odometry_1", "ForceCommand_32", "Heartbeat_7"):
-        assert name in names
-    kinds = ("Odometry", "ForceCommand", "AppliedForce", "Heartbeat")
-    expected = {"Sync"} | {f"{kind}_{n}" for kind in kinds for n in range(1, MAX_NODE + 1)}
-    assert len(names) == len(expected) and set(names) == expected
 
 
 # ------------------------------------------------------------------------------ round trips

@@ -7,7 +7,6 @@ from __future__ import annotations
 import contextlib
 import io
 import json
-import socket
 
 import pytest
 from fastapi.testclient import TestClient
@@ -179,22 +178,6 @@ def test_bad_input_is_one_error_line_and_status_2(argv, message, monkeypatch) ->
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("heft: error: "), err
     assert message in lines[0]
-
-
-def test_a_busy_port_is_status_4() -> None:
-    with socket.socket() as taken:
-        taken.bind(("127.0.0.1", 0))
-        taken.listen()
-        port = taken.getsockname()[1]
-        code, err = heft("dashboard", "--replay", str(PAPER), "--port", str(port))
-    assert code == 4 or "not an MCAP file" in err  # the file is checked first
-    with socket.socket() as taken:
-        taken.bind(("127.0.0.1", 0))
-        taken.listen()
-        port = taken.getsockname()[1]
-        code, err = heft("dashboard", "--team", "t", "--port", str(port))
-    assert code == 4, err
-    assert err.strip() == f"heft: error: listen 127.0.0.1:{port}: Address already in use"
 
 
 def test_the_estimates_json_is_finite(paper_run) -> None:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import subprocess
-import sys
 
 import pytest
 
@@ -19,7 +17,7 @@ from simulator.bench.noise import (
     run_seed,
 )
 from simulator.scenario import load_scenario
-from tests.helpers.paths import PAPER, ROOT
+from tests.helpers.paths import PAPER
 
 
 def _result(
@@ -78,28 +76,6 @@ def test_one_seed_against_the_centralized_fit() -> None:
     assert result.paper["mass"] is None
     assert all(len(flags) == 4 for flags in result.inside.values())
     assert result.floor["within"], result.floor
-
-
-@pytest.mark.parametrize(
-    "args, message",
-    [
-        (["--seeds", "3"], "--seeds needs --noise"),
-        (["--noise", "--plot", "x"], "--plot needs --sweep"),
-        (["--noise", "--seeds", "0"], "--seeds"),
-        (["--first-seed", "20"], "--first-seed needs --noise"),
-        (["--noise", "--first-seed", "-1"], "--first-seed"),
-    ],
-)
-def test_bench_noise_options(args: list[str], message: str) -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "agent", "bench", *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert done.returncode == 2, done.stderr
-    assert message in done.stderr and "Traceback" not in done.stderr
 
 
 def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:

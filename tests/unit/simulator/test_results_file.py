@@ -2,7 +2,7 @@
 or a signal mid-write leaves the previous file as it was, and no temporary behind), never
 created before the run, and written whatever the verdict — with ``"converged": false``, the
 reason and null estimates when nothing could be recorded. In one process; the runs over Zenoh
-are in tests/test_supervision.py."""
+are in tests/integration/test_supervision.py."""
 
 from __future__ import annotations
 
