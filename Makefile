@@ -4,28 +4,28 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-quick hil multihost lint bench clean
+.PHONY: demo test test-unit hil multihost lint bench clean
 
 demo: $(STAMP)  ## The paper's scenario, 4 robot processes over Zenoh in real time: table, JSON, plots.
 	$(BIN)/heft demo --out out/paper-results.json --plot out/plots
 
-test: $(STAMP) lint  ## Lint, then the whole test suite (hardware-in-the-loop on vcan, then multi-host).
-	$(BIN)/python -m pytest -q -m "not hil and not multihost"
+test: $(STAMP) lint  ## Lint, then every test: unit, integration and browser, then on vcan, then multi-host.
+	$(BIN)/python -m pytest -q tests/unit tests/integration tests/browser
 	$(MAKE) --no-print-directory hil
 	$(MAKE) --no-print-directory multihost
 
-hil: $(STAMP)  ## The hardware-in-the-loop tests, on real vcan (in User-Mode Linux if this kernel has none).
+hil: $(STAMP)  ## tests/hil on real vcan (in User-Mode Linux if this kernel has none).
 	@if $(BIN)/heft vcan --check; then \
-	  $(BIN)/heft vcan --timeout 1200 -- $(BIN)/python -m pytest -q -m hil -p no:cacheprovider; \
+	  $(BIN)/heft vcan --timeout 1200 -- $(BIN)/python -m pytest -q tests/hil -p no:cacheprovider; \
 	else \
-	  $(BIN)/python -m pytest -q -m hil -rs; \
+	  $(BIN)/python -m pytest -q tests/hil -rs; \
 	fi
 
-multihost: $(STAMP)  ## The team across network namespaces as hosts, over mutual TLS (needs root).
-	$(BIN)/python -m pytest -q -s -m multihost -p no:cacheprovider
+multihost: $(STAMP)  ## tests/multihost: network namespaces as hosts, mutual TLS (root).
+	$(BIN)/python -m pytest -q -s tests/multihost -p no:cacheprovider
 
-test-quick: $(STAMP) lint  ## Lint, then the tests not marked slow (no Zenoh, no processes).
-	$(BIN)/python -m pytest -q -m "not slow and not hil and not multihost"
+test-unit: $(STAMP)  ## The unit tests only (tests/unit: one process, no Zenoh, no network).
+	$(BIN)/python -m pytest -q tests/unit
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

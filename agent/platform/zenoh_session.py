@@ -197,7 +197,7 @@ piles up in this buffer; once the buffer is full, a TLS link's writer waits, and
 waits Zenoh cannot close the link when its lease expires: the router stalled, and the lost
 robot was noticed only once its link came back (3.1 s after a 3 s cut). A buffer that holds
 more than a lease's worth of a team's traffic lets the lease close the link: 1.6 s after the
-cut, measured on namespace hosts (tests/test_multihost.py)."""
+cut, measured on namespace hosts (tests/multihost/test_multihost.py)."""
 
 
 def zenoh_config(settings: ZenohSettings):

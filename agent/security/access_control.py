@@ -24,7 +24,8 @@ identity     publishes                          subscribes to                   
 ============ ================================== ================================= ===========
 
 (``robot-i`` is robot *i*'s computer, where its agent and its AGV bridge run.) What the
-router's access control checks, per message and per side (tested in tests/test_security.py):
+router's access control checks, per message and per side (tested in
+tests/integration/test_secured_network.py):
 
 - a put must be allowed *ingress* from its publisher and *egress* to each subscriber;
 - a subscriber's declaration must be allowed *ingress* from its subscriber;

@@ -1,0 +1,3 @@
+"""What several test modules share, whatever their level (no test module imports another):
+paths, the accuracy checks of a run against the ground truth, processes, fakes of a Zenoh
+session's parts, TLS placeholders, bad input files, and frames and messages to refuse."""

@@ -1,0 +1,234 @@
+"""The dashboard in a real browser during a live run: headless Chromium (Debian's, driven by
+Playwright) opens the page while the paper's scenario runs over Zenoh (a router, the plant and
+four agent processes, lockstep), and the page itself must show m̂ and Ĵ converging to the
+truth, the top view moving and the phase timeline reaching "done". The run is recorded on the
+way; replayed from the page, it shows the same final table as live.
+
+In CI (``CI`` set) a missing Chromium is a failure, never a skip."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from agent.platform.faults import FaultSettings
+from agent.platform.protocol import Control, Keys, encode
+from agent.platform.zenoh_session import ZenohSettings, open_session
+from dashboard.companion import RunCompanion
+from simulator.launcher import robot_toml
+from simulator.scenario import load_scenario
+from tests.helpers.paths import PAPER, ROOT
+
+pytestmark = pytest.mark.slow
+CHROMIUM = "/usr/bin/chromium"
+BROWSER_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+SCREENSHOT = ROOT / "out" / "dashboard.png"
+
+
+def chromium():
+    """Playwright's Chromium, pointed at Debian's (skipped only outside CI when missing)."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        sync_playwright = None
+    if sync_playwright is None or not Path(CHROMIUM).exists():
+        if os.environ.get("CI"):
+            pytest.fail(
+                f"the browser test needs playwright and {CHROMIUM} (apt-get install chromium)"
+            )
+        pytest.skip(f"needs playwright and {CHROMIUM}")
+    return sync_playwright
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class PaperTeam:
+    """The paper's team as processes: the plant and four agents, through a router."""
+
+    def __init__(self, router: str, team: str, folder: Path):
+        self.scenario = load_scenario(PAPER)
+        env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+        self.log = open(folder / "team.log", "w")  # noqa: SIM115 - closed in stop()
+        self.processes = []
+        heft = [sys.executable, "-m", "agent"]
+        for i in range(1, self.scenario.n + 1):
+            config = folder / f"robot-{i}.toml"
+            text = robot_toml(i, self.scenario, team, "lockstep", router, FaultSettings())
+            config.write_text(text, encoding="utf-8")
+            self._start([*heft, "agent", "--config", str(config)], env)
+        self._start(
+            [*heft, "sim", str(PAPER), "--team", team, "--clock", "lockstep", "--connect", router],
+            env,
+        )
+
+    def _start(self, args: list[str], env: dict) -> None:
+        self.processes.append(
+            subprocess.Popen(args, stdout=self.log, stderr=subprocess.STDOUT, env=env)
+        )
+
+    def stop(self) -> None:
+        for process in self.processes:
+            if process.poll() is None:
+                process.terminate()
+        for process in self.processes:
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+        self.log.close()
+
+
+TOP_SAMPLER = """() => {
+  window.topSamples = [];
+  setInterval(() => {
+    const contact = window.heft.views.top.lines().find((t) => t.name === "contact 1");
+    if (contact) window.topSamples.push([contact.x[0], contact.y[0]]);
+  }, 100);
+}"""
+CHART_ENDS = """(name) => window.heft.charts[name].lines().map((t) => ({
+  name: t.name, first: t.y[0], last: t.y[t.y.length - 1], count: t.y.length }))"""
+CHART_DRAWN = """(name) => {
+  const plot = window.heft.charts[name].plot;
+  return plot ? [plot.series.length - 1, plot.data[0].length] : null;
+}"""
+
+
+def wait_for(predicate, timeout_s: float, what: str, display=None) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}: {diagnosis(display)}"
+        time.sleep(0.1)
+
+
+def diagnosis(display) -> str:
+    """What the dashboard knew, for a failure message."""
+    if display is None:
+        return ""
+    state = display.hub.state
+    robots = {
+        i: (
+            v.estimates and (v.estimates.tick, v.estimates.phase.label, v.estimates.phase_since),
+            sorted(v.done_estimates)[:3],
+        )
+        for i, v in state.robots.items()
+    }
+    truths = (min(state.truths), max(state.truths)) if state.truths else None
+    feed = display.feed
+    alive = feed is not None and feed._thread.is_alive()
+    return (
+        f"robots {robots}, truths {truths}, done_instant {state.done_instant},"
+        f" rejected {dict(state.rejected)}, received {dict(state.received)}, feed alive {alive}"
+    )
+
+
+def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> None:
+    sync_playwright = chromium()
+    router = f"tcp/127.0.0.1:{free_port()}"
+    team = f"browser-{os.getpid()}"
+    scenario = load_scenario(PAPER)
+    # As heft demo does: the dashboard up before the run, then the recorder and the dashboard
+    # subscribed once the run's router is up, before the plant and the agents start.
+    companion = RunCompanion.open(scenario, tmp_path / "paper.mcap", dashboard=True, port=0)
+    display = companion.display
+    with open_session(ZenohSettings(mode="router", connect=(), listen=(router,))) as session:
+        processes = None
+        try:
+            companion.on_ready(router, team)
+            with sync_playwright() as p:
+                browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                errors: list[str] = []
+                page.on("pageerror", lambda err: errors.append(str(err)))
+                page.goto(display.url)
+                page.wait_for_function("window.heft && window.heft.frames > 0", timeout=20_000)
+                page.evaluate(TOP_SAMPLER)
+                started = time.monotonic()
+                processes = PaperTeam(router, team, tmp_path)
+                wait_for(lambda: display.hub.state.done, 120, "the team to be done", display)
+                session.put(Keys(team).control(), encode(Control("stop")))  # as the launcher
+                wait_for(lambda: display.hub.summary() is not None, 30, "the final table", display)
+                print(f"live run: {time.monotonic() - started:.1f} s")
+                page.wait_for_function(
+                    "window.heft.scene && window.heft.scene.table.final", timeout=20_000
+                )
+                page.wait_for_timeout(600)  # the charts' last redraw
+                live = display.hub.summary()
+
+                # The charts hold m̂ and Ĵ converging to the truth (5 kg, 12.3795 kg m²).
+                for chart, truth in (("mass", 5.0), ("moment", 12.3795)):
+                    traces = {t["name"]: t for t in page.evaluate(CHART_ENDS, chart)}
+                    drawn = page.evaluate(CHART_DRAWN, chart)  # uPlot holds every trace
+                    assert drawn is not None and drawn[0] == len(traces) and drawn[1] > 20
+                    robots = [t for name, t in traces.items() if "robot" in name]
+                    assert len(robots) == 4, traces
+                    truth_trace = next(t for name, t in traces.items() if "truth" in name)
+                    assert truth_trace["last"] == truth
+                    for trace in robots:
+                        assert abs(trace["last"] - truth) / truth < 1e-3, trace
+                edges = [t for t in page.evaluate(CHART_ENDS, "edge") if "robot" in t["name"]]
+                assert len(edges) == 3
+                contacts = scenario.contacts
+                true_norms = [math.dist(contacts[i - 1], contacts[i]) for i in (1, 2, 3)]
+                for trace, true_norm in zip(sorted(edges, key=lambda t: t["name"]), true_norms):
+                    assert trace["count"] > 20
+                    assert abs(trace["last"] - true_norm) < 1e-3
+                    assert abs(trace["first"] - true_norm) > 10 * abs(trace["last"] - true_norm)
+                # The top view moved with the load.
+                samples = [s for s in page.evaluate("window.topSamples") if None not in s]
+                assert len({tuple(s) for s in samples}) >= 3, samples
+                assert math.dist(samples[0], samples[-1]) > 0.1
+                # The phase timeline reached "done" for every robot.
+                segments = page.evaluate("window.heft.views.timeline.lines().map((t) => t.name)")
+                done = [name.removeprefix("done ") for name in segments if name.startswith("done ")]
+                assert sorted(done) == [f"robot {i}" for i in range(1, 5)]
+                assert page.inner_text("#table-title").startswith("final")
+                SCREENSHOT.parent.mkdir(exist_ok=True)
+                page.screenshot(path=str(SCREENSHOT))
+                assert SCREENSHOT.stat().st_size > 20_000
+                csv = page.evaluate("window.heft.csv()")
+                assert csv.startswith("chart,trace,t_s,value\n") and "mass" in csv
+
+                # Replayed from the page, as fast as it goes: the same final table.
+                started = time.monotonic()
+                processes.stop()
+                companion.run_over()
+                print(f"stop: {time.monotonic() - started:.1f} s")
+                page.select_option("#replay-speed", "0")
+                page.click("#replay-restart")
+                wait_for(lambda: display.hub.mode == "replay", 10, "the replay to start")
+                started = time.monotonic()
+                wait_for(lambda: display.hub.replayer.finished.is_set(), 60, "the replay")
+                print(f"replay: {time.monotonic() - started:.1f} s")
+                print(f"replay: {display.hub.replayer.recording.read_count} messages")
+                assert display.hub.summary() == live
+                page.wait_for_function(
+                    "window.heft.source.mode === 'replay' && window.heft.scene.table.final",
+                    timeout=20_000,
+                )
+                assert page.inner_text("#source").startswith("REPLAY")
+                assert errors == []
+                browser.close()
+        finally:
+            if processes is not None:
+                processes.stop()
+            companion.close()

@@ -1,0 +1,161 @@
+"""``heft record`` over Zenoh, as a process beside a team publishing on a router: it keeps every
+robot's measurements and commands, closes its file on SIGTERM and leaves it readable up to the
+cut when killed with SIGKILL; and the live display follows a team and drops what is forged."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from agent.platform.protocol import Command, Estimates, Keys, Measurement, Phase, encode
+from agent.platform.zenoh_session import ZenohSettings, open_session
+from dashboard.replay import Recording, Replayer
+from dashboard.state import TeamState
+from tests.helpers.paths import ROOT
+
+
+# ------------------------------------------------------------------------------ over Zenoh
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Team:
+    """A router in this process and a fake team publishing on it at 200 Hz: measurements,
+    commands and estimates of robots 1 and 2."""
+
+    def __init__(self, team: str):
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.keys = Keys(team)
+        self.session = open_session(
+            ZenohSettings(mode="router", connect=(), listen=(self.endpoint,))
+        )
+        self.tick = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._publish, daemon=True)
+
+    def _publish(self) -> None:
+        keys, put = self.keys, self.session.put
+        while not self._stop.is_set():
+            k = self.tick
+            for i in (1, 2):
+                put(keys.velocity(i), encode(Measurement(i, k, k * 0.005, (0.1, 0.0), (1.0, 0.0))))
+                put(keys.force(i), encode(Command(i, k, (1.0, -1.0))))
+                put(keys.estimate(i), encode(Estimates(i, k, Phase.EXCITE, omega=0.01 * k)))
+            put(keys.force(1), b"forged")  # counted and dropped, never recorded
+            self.tick = k + 1
+            time.sleep(0.005)
+
+    def __enter__(self) -> Team:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.session.close()
+
+
+def start_recorder(path: Path, team: Team) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    args = [sys.executable, "-m", "agent", "record", "--team", team.keys.team, "-o", str(path)]
+    process = subprocess.Popen(
+        [*args, "--connect", team.endpoint],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        env=env,
+    )
+    said = []
+    while len(said) < 3 and not any("recording team" in line for line in said):
+        said.append(process.stderr.readline())  # (after the plain link's note, if any)
+    assert "recording team" in said[-1], "".join(said) + process.stderr.read()
+    threading.Thread(target=process.stderr.read, daemon=True).start()  # (never blocks it)
+    return process
+
+
+def read_all(path: Path) -> tuple[Recording, list]:
+    recording = Recording(path)
+    return recording, list(recording.messages())
+
+
+def check_stream(messages: list) -> None:
+    """Both robots' measurements, commands and estimates, every tick in order."""
+    kinds = {(type(r.message).__name__, r.key.split("/")[3]) for r in messages}
+    assert kinds == {(k, i) for k in ("Measurement", "Command", "Estimates") for i in "12"}
+    ticks = [r.message.tick for r in messages if isinstance(r.message, Measurement)]
+    assert ticks == sorted(ticks)
+
+
+@pytest.mark.slow
+def test_heft_record_closes_its_file_on_sigterm(tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    with Team(f"rec-{os.getpid()}") as team:
+        recorder = start_recorder(path, team)
+        time.sleep(1.5)
+        recorder.send_signal(signal.SIGTERM)
+        assert recorder.wait(timeout=15) == 0
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None and summary.statistics.message_count > 100
+    recording, messages = read_all(path)
+    assert recording.cut is None and len(messages) == summary.statistics.message_count
+    check_stream(messages)
+
+
+@pytest.mark.slow
+def test_a_recording_killed_with_sigkill_replays_up_to_the_cut(tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    with Team(f"kill-{os.getpid()}") as team:
+        recorder = start_recorder(path, team)
+        time.sleep(2.0)
+        killed_at = team.tick
+        recorder.kill()
+        assert recorder.wait(timeout=15) == -signal.SIGKILL
+    recording, messages = read_all(path)
+    assert not recording.rejected
+    check_stream(messages)
+    last = max(r.message.tick for r in messages)
+    # Chunks are flushed every 0.5 s: at most that (and a little scheduling) was lost.
+    assert killed_at - last < 0.5 / 0.005 + 100, (killed_at, last)
+    # And it replays: the dashboard's state follows it to its last estimates.
+    state = TeamState(recording.team)
+    replay = Replayer(Recording(path), lambda r, t: state.ingest(r.message, t), speed=0).start()
+    assert replay.finished.wait(30)
+    assert state.robots[1].estimates.tick >= last - 1
+
+
+@pytest.mark.slow
+def test_the_live_display_follows_a_team_and_drops_what_is_forged() -> None:
+    from dashboard.display import Display
+
+    with Team(f"live-{os.getpid()}") as team:
+        display = Display.open(team.keys.team, port=0)
+        try:
+            display.watch(ZenohSettings(mode="client", connect=(team.endpoint,)))
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline:
+                robots = display.hub.snapshot()["robots"]
+                if {"1", "2"} <= set(robots) and display.feed.rejects.total > 10:
+                    break
+                time.sleep(0.1)
+            snapshot = display.hub.snapshot()
+            assert snapshot["robots"]["2"]["tick"] > 0
+            assert snapshot["robots"]["1"]["omega"] == pytest.approx(
+                0.01 * snapshot["robots"]["1"]["tick"]
+            )
+            assert display.feed.rejects.counts["force"] > 10  # the forged payloads
+            assert display.feed.failures == 0
+        finally:
+            display.close()

@@ -1,0 +1,106 @@
+"""Recordings (dashboard/recorder.py) and replays (dashboard/replay.py) in one process: a run
+recorded and replayed gives the same final table; replays step and pause; what is not a
+recording is refused. ``heft record`` over Zenoh is in
+tests/integration/test_recording_over_zenoh.py."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from agent.platform.protocol import Command, Keys
+from dashboard.geometry import LoadGeometry
+from dashboard.recorder import Recorder
+from dashboard.replay import Recording, RecordingError, Replayer
+from dashboard.state import TeamState
+from tests.helpers.paths import PAPER
+
+
+@pytest.fixture(scope="module")
+def paper_run():
+    from simulator.inprocess import run_inprocess
+    from simulator.scenario import load_scenario
+
+    scenario = load_scenario(PAPER)
+    return scenario, run_inprocess(scenario)
+
+
+def record_run(path: Path, scenario, outcome, team: str = "paper") -> None:
+    """The run's recorded instants as a recording, 10 ms of simulated time apart."""
+    keys = Keys(team)
+    start = 1_700_000_000_000_000_000
+    with Recorder(path, team, LoadGeometry.from_scenario(scenario)) as recorder:
+        for sample in [*outcome.history, outcome.final]:
+            stamp = start + round(sample.truth.time_s * 1e9)
+            recorder.write(keys.truth(), sample.truth, stamp)
+            for i, est in sample.estimates.items():
+                recorder.write(keys.estimate(i), est, stamp)
+                recorder.write(keys.force(i), Command(i, sample.truth.tick, (1.0, 0.0)), stamp)
+
+
+def test_a_replayed_recording_gives_the_runs_final_table(tmp_path: Path, paper_run) -> None:
+    scenario, outcome = paper_run
+    path = tmp_path / "paper.mcap"
+    record_run(path, scenario, outcome)
+    # The file is a proper MCAP file with a summary and JSON-schema channels.
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics.message_count > 0
+        schemas = {schema.name: schema.encoding for schema in summary.schemas.values()}
+        assert schemas == {
+            "heft.Truth": "jsonschema",
+            "heft.Estimates": "jsonschema",
+            "heft.Command": "jsonschema",
+        }
+        assert {c.message_encoding for c in summary.channels.values()} == {"json"}
+    direct = TeamState("paper", LoadGeometry.from_scenario(scenario))
+    for sample in [*outcome.history, outcome.final]:
+        direct.ingest(sample.truth, 0.0)
+        for est in sample.estimates.values():
+            direct.ingest(est, 0.0)
+    recording = Recording(path)
+    assert recording.header() == ("paper", LoadGeometry.from_scenario(scenario))
+    replayed = TeamState("paper", recording.geometry)
+    replayer = Replayer(recording, lambda r, t: replayed.ingest(r.message, t), speed=0).start()
+    assert replayer.finished.wait(30)
+    assert recording.cut is None and not recording.rejected
+    assert replayed.final == direct.final is not None
+    assert replayed.final["tick"] == outcome.final.truth.tick
+    assert replayed.all_series() == direct.all_series()
+
+
+def test_a_replay_steps_and_pauses(tmp_path: Path, paper_run) -> None:
+    scenario, outcome = paper_run
+    path = tmp_path / "paper.mcap"
+    record_run(path, scenario, outcome)
+    heard: list[float] = []
+    replayer = Replayer(Recording(path), lambda r, t: heard.append(t), paused=True).start()
+    time.sleep(0.2)
+    assert heard == []  # paused from the start
+    replayer.step(1.0)
+    deadline = time.monotonic() + 5
+    while replayer.now() < 1.0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)
+    assert heard and max(heard) <= 1.0 and replayer.paused
+    assert replayer.now() == 1.0
+    count = len(heard)
+    time.sleep(0.2)
+    assert len(heard) == count  # stays paused after the step
+    replayer.play(speed=0)
+    assert replayer.finished.wait(10)
+    assert max(heard) == pytest.approx(outcome.final.truth.time_s)
+    with pytest.raises(ValueError):
+        replayer.play(speed=-1)
+
+
+def test_what_is_not_a_recording_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="no such file|cannot read"):
+        Recording(tmp_path / "missing.mcap")
+    (tmp_path / "junk.mcap").write_bytes(b"not mcap at all")
+    with pytest.raises(RecordingError, match="not an MCAP file"):
+        Recording(tmp_path / "junk.mcap")

@@ -1,0 +1,72 @@
+"""The launcher's collector (simulator/launcher.py) fed by hand: the final instant of a run over
+Zenoh, whatever the order in which its messages arrive."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from agent.platform.protocol import Estimates, Keys, Phase, Truth, encode
+from simulator import launcher
+from tests.helpers.fakes import FakeFifo
+
+
+class _Subscriptions:
+    """Just enough of a Zenoh session for a :class:`launcher.Collector` fed by hand:
+    :meth:`feed` queues a message on the subscription of its key."""
+
+    def __init__(self) -> None:
+        self.fifos: dict[str, FakeFifo] = {}
+
+    def declare_subscriber(self, key, handler):
+        return self.fifos.setdefault(key, FakeFifo())
+
+    def feed(self, key: str, payload: bytes) -> None:
+        self.fifos[key](SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: payload)))
+
+
+def _truth(tick: int) -> Truth:
+    return Truth(
+        tick=tick,
+        time_s=tick * 0.01,
+        com_position=(0.0, 0.0),
+        angle=0.0,
+        com_velocity=(0.0, 0.0),
+        omega=0.0,
+        contacts=((1.0, 0.0), (-1.0, 0.0)),
+        contact_velocities=((0.0, 0.0), (0.0, 0.0)),
+        contact_to_com=((-1.0, 0.0), (1.0, 0.0)),
+        mass=5.0,
+        moment=2.0,
+    )
+
+
+def test_the_final_instant_is_the_first_at_which_every_robot_is_done(monkeypatch) -> None:
+    """Messages from different processes cross: the instant after the final one may be complete
+    first. The collector still ends on the final instant, the one the in-process run ends on;
+    if the final instant never completes, it ends on the later one after a grace."""
+    keys = Keys("t")
+    key = {Truth: keys.truth(), Estimates: keys.all_estimates()}
+    for final_arrives in (True, False):
+        subscriptions = _Subscriptions()
+        collector = launcher.Collector(subscriptions, keys, 2, record_every=5)
+        # Robot 1 done since 98, robot 2 since 100: the final instant is 100.
+        messages = [(Truth, _truth(101))]
+        messages += [
+            (Estimates, Estimates(r, 101, Phase.DONE, since)) for r, since in [(1, 98), (2, 100)]
+        ]
+        messages += [
+            (Estimates, Estimates(r, 100, Phase.DONE, since)) for r, since in [(1, 98), (2, 100)]
+        ]
+        for kind, message in messages:
+            subscriptions.feed(key[kind], encode(message))
+        collector.drain(0.0)
+        assert collector.final is not None and collector.final.truth.tick == 101
+        assert not collector.finished()
+        if final_arrives:
+            subscriptions.feed(key[Truth], encode(_truth(100)))
+            collector.drain(0.0)
+            assert collector.finished() and collector.final.truth.tick == 100
+        else:
+            monkeypatch.setattr(launcher, "FINAL_GRACE_S", 0.0)
+            assert collector.finished() and collector.final.truth.tick == 101
+            monkeypatch.undo()

@@ -1,0 +1,115 @@
+"""``heft bench --noise``: its report from known results, one real seed, and its options."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from simulator.bench.noise import (
+    NoiseSettings,
+    SeedResult,
+    coverage,
+    format_noise_report,
+    format_sweep,
+    median,
+    plot_sweep,
+    run_seed,
+)
+from simulator.scenario import load_scenario
+from tests.helpers.paths import PAPER
+
+
+def _result(
+    seed: int, scale: float, done: float = 12.0, inside: bool = True, travel: float = 0.5
+) -> SeedResult:
+    errors = {"mass": 0.001, "moment": 0.004, "contact_to_com": 0.004, "relative": 0.002}
+    return SeedResult(
+        seed=seed,
+        robust={k: scale * v for k, v in errors.items()},
+        paper=dict.fromkeys(errors),
+        baseline=dict(errors),
+        robust_time_s=done,
+        robust_done=True,
+        paper_done=False,
+        inside={k: [inside] * 4 for k in errors},
+        floor={"travel_m": travel, "speed": 1.0, "omega": 1.0, "within": travel <= 3.0},
+    )
+
+
+def test_the_report_judges_each_goal() -> None:
+    good = [_result(s, 1.2, inside=s != 0) for s in range(20)]  # 76 of 80 inside: 95 %
+    assert median(good, "robust", "mass") == pytest.approx(0.0012)
+    assert median(good, "paper", "mass") is None  # some run has none: unbounded
+    assert coverage(good, "moment") == (76, 80)
+    report = format_noise_report(good, NoiseSettings(), "scenario 'paper'", 10.0)
+    assert report.endswith(": met")
+    assert "m (%)" in report and "1.20" in report and "95 % of 80" in report
+    slow = [*good[:-1], _result(19, 1.2, done=25.0)]
+    assert "19/20" in format_noise_report(slow, NoiseSettings(), "x", 1.0)
+    assert format_noise_report(slow, NoiseSettings(), "x", 1.0).endswith("NOT met")
+    worse = [_result(s, 2.0, inside=s != 0) for s in range(20)]
+    assert format_noise_report(worse, NoiseSettings(), "x", 1.0).endswith("NOT met")
+    off_the_floor = [*good[:-1], _result(19, 1.2, travel=3.5)]
+    report = format_noise_report(off_the_floor, NoiseSettings(), "x", 1.0)
+    assert "on its floor: 19/20 (largest travel 3.50 m" in report and report.endswith("NOT met")
+    overconfident = [_result(s, 1.0, inside=s % 2 == 0) for s in range(20)]
+    assert format_noise_report(overconfident, NoiseSettings(), "x", 1.0).endswith("NOT met")
+
+
+def test_the_sweep_table_and_plot(tmp_path) -> None:
+    found = {0.0: [_result(0, 1.0)], 0.01: [_result(0, 1.5)]}
+    table = format_sweep(found, "scenario 'paper'")
+    assert "| 0.01 | 0.5 |" in table and "0.15 / - / 0.1" in table
+    path = plot_sweep(found, tmp_path / "sweep.png", "scenario 'paper'")
+    assert path.stat().st_size > 10_000
+
+
+def test_one_seed_against_the_centralized_fit() -> None:
+    """One real seed: the robust run ends, the baseline fits its measurements, and both are
+    close to the truth; the paper's estimators do not finish."""
+    settings = NoiseSettings(seeds=1, max_time_s=25.0)
+    result = run_seed(load_scenario(PAPER), dataclasses.replace(settings), 1)
+    assert result.robust_done and not result.paper_done
+    assert result.robust["mass"] < 0.03 and result.baseline["mass"] < 0.02
+    assert result.baseline["relative"] < 0.005 and result.robust["relative"] < 0.01
+    assert result.paper["mass"] is None
+    assert all(len(flags) == 4 for flags in result.inside.values())
+    assert result.floor["within"], result.floor
+
+
+def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:
+    from simulator.bench.changes import ChangeResult, format_change_report
+
+    def row(seed: int, case: str, mass: float) -> ChangeResult:
+        return ChangeResult(
+            seed=seed,
+            case=case,
+            latency_s=None if case == "none" else 1.5,
+            false_alarms=0,
+            errors={"mass_rel": mass, "moment_rel": 0.005, "contact_to_com_m": 0.006},
+            converged=True,
+            on_floor=True,
+            baseline={}
+            if case == "none"
+            else {"mass": 0.004, "moment": 0.01, "contact_to_com": 0.012},
+        )
+
+    results = [row(s, c, 0.006 + 0.001 * s) for s in range(3) for c in ("mass", "com", "none")]
+    report = format_change_report(results)
+    lines = {line.split()[0]: line for line in report.splitlines() if line.strip()}
+    # Median re-estimated mass 0.7 % against the fit's 0.4 %: 1.75; J 0.5; ctc 0.5.
+    assert lines["mass"].endswith("1.75 / 0.50 / 0.50")
+    assert "0.40%" in lines["com"] and "12.0mm" in lines["com"]
+    assert report.splitlines()[-1] == "goals: met"
+
+
+def test_the_seeds_run_start_at_first_seed(monkeypatch) -> None:
+    import simulator.bench.noise as bench
+
+    seen = []
+    monkeypatch.setattr(bench, "run_seed", lambda scenario, settings, seed: seen.append(seed))
+    bench.run_noise_bench(lambda seed: None, NoiseSettings(seeds=3, first_seed=20))
+    assert seen == [20, 21, 22]
+    report = format_noise_report([_result(20, 1.0), _result(21, 1.0)], NoiseSettings(), "x", 1.0)
+    assert "2 seeds (20-21)" in report.splitlines()[0]

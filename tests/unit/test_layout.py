@@ -1,0 +1,168 @@
+"""The product's layout: its top-level packages and nothing else, no import cycle between its
+modules, and one ``heft`` command listing every package's commands. (Light modules that stay
+light, in fresh interpreters: tests/integration/test_import_weight.py.)"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import re
+import tomllib
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+
+from agent.platform.dispatch import GROUP, main
+from tests.helpers.paths import ROOT
+
+PRODUCT_PACKAGES = ("agent", "simulator", "bridge", "dashboard")
+"""The packages the product ships (bridge and dashboard once they exist)."""
+TOP_LEVEL = {*PRODUCT_PACKAGES, "tests", "deploy"}
+COMMANDS = {"run", "scenario", "bench", "agent", "sim", "router", "demo", "deploy"}
+
+
+# ------------------------------------------------------------------------------ the tree
+def test_the_top_level_tree_has_only_the_products_packages() -> None:
+    directories = [p for p in ROOT.iterdir() if p.is_dir() and not p.name.startswith(".")]
+    with_python = {p.name for p in directories if next(p.rglob("*.py"), None) is not None}
+    assert with_python <= TOP_LEVEL - {"deploy"}, sorted(with_python - TOP_LEVEL)
+    packages = {p.name for p in directories if (p / "__init__.py").is_file()}
+    assert {"agent", "simulator", "tests"} <= packages
+    assert packages <= set(PRODUCT_PACKAGES) | {"tests"}, sorted(packages)
+    assert (ROOT / "deploy").is_dir() and "deploy" not in packages
+    assert sorted(p.name for p in ROOT.glob("*.py")) == []  # no top-level module
+
+
+def test_the_distribution_ships_only_the_products_packages() -> None:
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    include = pyproject["tool"]["setuptools"]["packages"]["find"]["include"]
+    assert {pattern.rstrip("*") for pattern in include} <= set(PRODUCT_PACKAGES), include
+    assert pyproject["project"]["scripts"] == {"heft": "agent.platform.dispatch:main"}
+    declared = pyproject["project"]["entry-points"][GROUP]
+    assert set(declared) <= set(PRODUCT_PACKAGES), declared
+    for package, target in declared.items():
+        assert target == f"{package}.cli:register", (package, target)
+
+
+# ------------------------------------------------------------------------------ import graph
+def project_modules() -> dict[str, Path]:
+    """Every module of the product's packages, by dotted name (a package by its own name)."""
+    modules = {}
+    for package in PRODUCT_PACKAGES:
+        if not (ROOT / package / "__init__.py").is_file():
+            continue
+        for path in sorted((ROOT / package).rglob("*.py")):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            modules[".".join(parts)] = path
+    return modules
+
+
+def imported_names(path: Path, module: str) -> set[str]:
+    """Every name ``path`` imports, anywhere in it (functions and ``TYPE_CHECKING`` included):
+    ``import a.b`` gives ``a.b``; ``from a.b import c`` gives ``a.b`` and ``a.b.c``."""
+    is_package = path.name == "__init__.py"
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                here = module.split(".") if is_package else module.split(".")[:-1]
+                base = ".".join(here[: len(here) - node.level + 1] + [node.module or ""])
+                base = base.strip(".")
+            else:
+                base = node.module or ""
+            names.add(base)
+            names.update(f"{base}.{alias.name}" for alias in node.names)
+    return names
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the product modules it imports."""
+    modules = project_modules()
+    return {
+        name: {other for other in imported_names(path, name) if other in modules} - {name}
+        for name, path in modules.items()
+    }
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of ``graph`` as ``[a, b, ..., a]``, or None (depth-first, no recursion)."""
+    state: dict[str, str] = {}  # "open" while on the current path, then "done"
+    for start in sorted(graph):
+        if start in state:
+            continue
+        path, stack = [start], [iter(sorted(graph[start]))]
+        state[start] = "open"
+        while stack:
+            nxt = next(stack[-1], None)
+            if nxt is None:
+                stack.pop()
+                state[path.pop()] = "done"
+            elif state.get(nxt) == "open":
+                return path[path.index(nxt) :] + [nxt]
+            elif nxt not in state:
+                state[nxt] = "open"
+                path.append(nxt)
+                stack.append(iter(sorted(graph.get(nxt, ()))))
+    return None
+
+
+def test_find_cycle() -> None:
+    assert find_cycle({"a": {"b", "c"}, "b": {"c"}, "c": set()}) is None
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"b"}}) == ["b", "c", "b"]
+
+
+def test_imported_names_sees_every_import(tmp_path: Path) -> None:
+    path = tmp_path / "mod.py"
+    path.write_text(
+        "from typing import TYPE_CHECKING\n"
+        "import agent.platform.protocol\n"
+        "if TYPE_CHECKING:\n"
+        "    from simulator.inprocess import RunOutcome\n"
+        "def f():\n"
+        "    from . import results\n"
+        "    from .plots import write_plots\n",
+        encoding="utf-8",
+    )
+    names = imported_names(path, "simulator.cli")
+    assert {"agent.platform.protocol", "simulator.inprocess", "simulator.results"} <= names
+    assert {"simulator.plots", "simulator.plots.write_plots"} <= names
+
+
+def test_no_import_cycle_between_the_products_modules() -> None:
+    graph = import_graph()
+    assert "agent.platform.dispatch" in graph and "simulator.cli" in graph
+    assert "simulator.inprocess" in graph["simulator.cli"]  # a function-level import
+    cycle = find_cycle(graph)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+# ------------------------------------------------------------------------------ heft --help
+def registered_commands() -> set[str]:
+    """The commands the packages of the entry-point group register."""
+    names: set[str] = set()
+    for entry in metadata.entry_points(group=GROUP):
+        commands = argparse.ArgumentParser().add_subparsers()
+        entry.load()(commands)
+        names.update(commands.choices)
+    return names
+
+
+def test_heft_help_lists_every_registered_command_on_one_line(capsys, monkeypatch) -> None:
+    monkeypatch.setenv("COLUMNS", "80")
+    registered = registered_commands()
+    assert registered >= COMMANDS
+    with pytest.raises(SystemExit) as exited:
+        main(["--help"])
+    assert exited.value.code == 0
+    out = capsys.readouterr().out
+    block = out.split("\ncommands:\n", 1)[1].split("\n\n", 1)[0].splitlines()
+    assert block[0].strip() == "COMMAND", block
+    listed = [re.match(r"^    (\S+) +\S", line) for line in block[1:]]
+    assert all(listed), block  # no continuation line: one line per command
+    assert sorted(m.group(1) for m in listed if m) == sorted(registered)
