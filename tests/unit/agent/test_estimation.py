@@ -18,7 +18,6 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
-from agent.algorithm.estimation.centroid import MAX_MASS_INFORMATION, CentroidConsensus, mass_input
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -28,15 +27,19 @@ from agent.algorithm.estimation.com_velocity import com_velocity
 from agent.algorithm.estimation.consensus import metropolis_weight
 from agent.algorithm.estimation.estimator import Estimator
 from agent.algorithm.estimation.excitation import kick_force, spin_up_force
-from agent.algorithm.estimation.inertia import InertiaEstimator, inertia_force
+from agent.algorithm.estimation.inertia import inertia_force
 from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
+from agent.algorithm.estimation.team_consensus import TeamConsensus
 from agent.algorithm.paper.com_regression import ComRegression
 from agent.algorithm.paper.filtered_regression import FilteredRegression
+from agent.algorithm.paper.inertia import InertiaEstimator
 from agent.algorithm.paper.mass import MassEstimator
 from agent.algorithm.paper.relative_position import RelativePosition
+from agent.algorithm.robust.team_mass import MAX_MASS_INFORMATION, inputs, mass_input, team_mass
 from agent.algorithm.safety import saturate
 from agent.platform.geometry import angle_between, arc_factor, cross, rotate
 from agent.platform.protocol import Share
+from agent.platform.team import TeamState
 
 Q = np.array([[0.0, -1.0], [1.0, 0.0]])
 FAST = settings(max_examples=50, deadline=None)
@@ -473,21 +476,32 @@ class TurningLoad:
         return (float(z[0]), float(z[1]))
 
 
-def message(i: int, t: int, c: CentroidConsensus) -> Share:
+class Member(TeamConsensus):
+    """One robot's team consensus with the robust family's inputs, settable: its drive's gain
+    and its mass input; its states by their symbols."""
+
+    def __init__(self, robot: int, neighbours):
+        self.gain_input, self.mass_input = 1.0, (0.0, 0.0)
+        super().__init__(robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input))
+
+    spread = property(lambda self: self["mean_square_offset"])
+    gain = property(lambda self: self["mean_gain"])
+    gain_centroid = property(lambda self: self["mean_gain_offset"])
+    gain_spread = property(lambda self: self["mean_gain_square_offset"])
+
+    def team_mass(self, own: float):
+        return team_mass(self["mean_mass_information"], self["mean_weighted_mass"], own)
+
+
+def message(i: int, t: int, c: Member) -> Share:
     return Share(
         sender=i,
         tick=t,
         velocity=(0.0, 0.0),
         degree=c.degree,
-        centroid=c.centroid,
-        spread=c.spread,
-        flows=c.shared_flows(),
         instant=t,
-        gain=c.gain,
-        gain_centroid=c.gain_centroid,
-        gain_spread=c.gain_spread,
-        mass_information=c.mass_information,
-        mass_weighted=c.mass_weighted,
+        team=c.state,
+        flows=c.shared_flows(),
     )
 
 
@@ -497,7 +511,7 @@ def run_consensus(p, edges, rounds, turn=0.0, lost=frozenset(), gains=None, mass
     Yields the team after each instant."""
     n = len(p)
     nb = neighbours_of(n, edges)
-    team = {i: CentroidConsensus(i, sorted(nb[i])) for i in range(n)}
+    team = {i: Member(i, sorted(nb[i])) for i in range(n)}
     for i, c in team.items():
         c.gain_input = 1.0 if gains is None else gains[i]
         if masses is not None:
@@ -512,7 +526,7 @@ def run_consensus(p, edges, rounds, turn=0.0, lost=frozenset(), gains=None, mass
                     heard[i][j] = sent[j]
         for i, c in team.items():
             frames[i].instant = t
-            c.update(turn, heard[i], frames[i], 0.01)
+            c.update(turn, heard[i], frames[i])
         sent = {i: message(i, t, c) for i, c in team.items()}
         yield team
 
@@ -536,7 +550,6 @@ def test_centroid_consensus_converges_to_offsets_and_w(kind, turn):
     assert np.abs(x - truth).max() < 1e-9
     w = float((truth**2).sum())
     for c in team.values():
-        assert c.estimate[0] == c.centroid and c.covariance is None
         assert c.spread == pytest.approx(w / n, abs=1e-9)
 
 
@@ -651,17 +664,15 @@ def test_centroid_consensus_one_update_by_hand():
     p = np.array([[0.0, 0.0], [1.0, 2.0], [-3.0, 0.5]])
     frame = TurningLoad(p, 0, phi)
     frame.instant = t
-    c = CentroidConsensus(0, (1, 2))
+    c = Member(0, (1, 2))
     x1, x2 = (0.4, -0.3), (-1.1, 0.7)
+    team1 = TeamState(centroid_offset=x1, mean_square_offset=0.8)
+    team2 = TeamState(centroid_offset=x2, mean_square_offset=-0.2)
     shares = {
-        1: Share(
-            sender=1, tick=t - 1, velocity=(0, 0), degree=2, centroid=x1, spread=0.8, instant=t - 1
-        ),
-        2: Share(
-            sender=2, tick=t - 1, velocity=(0, 0), degree=3, centroid=x2, spread=-0.2, instant=t - 3
-        ),
+        1: Share(sender=1, tick=t - 1, velocity=(0, 0), degree=2, instant=t - 1, team=team1),
+        2: Share(sender=2, tick=t - 1, velocity=(0, 0), degree=3, instant=t - 3, team=team2),
     }
-    c.update(phi, shares, frame, 0.01)
+    c.update(phi, shares, frame)
     a1, a2 = 1 / 3, 1 / 4
     expected = a1 * (rot(phi) @ x1 + frame.relative_position(1)) + a2 * (
         rot(3 * phi) @ x2 + frame.relative_position(2)
@@ -676,24 +687,25 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
     phi, t = 0.3, 7
     frame = TurningLoad(np.zeros((2, 2)), 0, phi)
     frame.instant = t
-    c = CentroidConsensus(0, (1,))
+    c = Member(0, (1,))
     theirs = Share(
         sender=1,
         tick=t - 2,
         velocity=(0, 0),
         degree=1,
-        spread=2.0,
+        # x_j where this robot's x_i will be: the iteration's own term is nil.
+        team=TeamState(centroid_offset=(0.5, -1.0), mean_square_offset=2.0),
         flows=((0, 0.5, -1.0, 0.25, *[0.0] * 6),),
         instant=t - 2,
     )
-    c.update(phi, {1: theirs}, frame, 0.01)
+    c.update(phi, {1: theirs}, frame)
     x = rot(2 * phi) @ np.array([0.5, -1.0])
     xi = x @ x + 0.25
     ds1 = 0.5 * (2.0 - xi)
     assert c.centroid == pytest.approx(tuple(x), abs=1e-12)
     assert c.spread == pytest.approx(x @ x + 0.25 + ds1, abs=1e-12)
     frame.instant = t + 1
-    c.update(phi, {1: theirs}, frame, 0.01)
+    c.update(phi, {1: theirs}, frame)
     x = rot(phi) @ x
     assert c.centroid == pytest.approx(tuple(x), abs=1e-12)
     xi = x @ x + 0.25 + ds1
@@ -707,7 +719,6 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
 def test_every_estimator_has_the_common_shape():
     estimators = [
         RelativePosition(5.0),
-        CentroidConsensus(1, (2, 3)),
         InertiaEstimator(5.0),
         ComRegression(5.0, 4, 2.0, (0.0, 1.0)),
         ComObserver(4, 2.0, (0.0, 1.0), 1.0, 0.5),

@@ -17,6 +17,7 @@ from agent.platform.protocol import (
     DOMAINS,
     KINDS,
     WIRE_VERSION,
+    Barrier,
     BridgeStatus,
     Clock,
     Command,
@@ -33,6 +34,7 @@ from agent.platform.protocol import (
     decode,
     encode,
 )
+from agent.platform.team import TeamState
 
 STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
 JSON_CLASSES = (Status, Truth, Control, PlantStatus, BridgeStatus)
@@ -83,29 +85,25 @@ SHARE_CENTROID = Share(
     tick=500,
     velocity=(-0.5, 0.75),
     degree=1,
-    centroid=(1.5, -2.25),
-    spread=3.125,
-    phase=2,
-    ready=0b1011,
-    switch_at=620,
+    barrier=Barrier(phase=Phase.PUSH, ready=0b1011, switch_at=620),
+    team=TeamState(centroid_offset=(1.5, -2.25), mean_square_offset=3.125),
 )
 SHARE_FLOWS = Share(
     sender=3,
     tick=2**40,
     velocity=(1e-9, -100.0),
     degree=2,
-    centroid=None,
-    spread=0.5,
-    phase=1,
-    ready=2**64 - 1,
-    switch_at=-1,
+    barrier=Barrier(phase=Phase.INERTIA, ready=2**64 - 1, switch_at=-1),
+    team=TeamState(
+        mean_square_offset=0.5,
+        mean_gain=1.02,
+        mean_gain_offset=(0.04, -0.01),
+        mean_gain_square_offset=2.5,
+    ),
     flows=(
         (2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3, 4.0, 20.0),
         (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3, 0.0, -1.0),
     ),
-    gain=1.02,
-    gain_centroid=(0.04, -0.01),
-    gain_spread=2.5,
 )
 CLOCK = Clock(tick=42, time_s=0.42)
 ESTIMATES_EMPTY = Estimates(robot=1, tick=0, phase=Phase.EXCITE)
@@ -117,7 +115,7 @@ ESTIMATES_FULL = Estimates(
     omega=0.75,
     relative_positions={1: (0.5, -1.25), 3: (-2.0, 0.0)},
     centroid_offset=(0.1, 0.2),
-    spread=4.5,
+    w=4.5,
     moment=12.3795,
     com_offset=(-0.3, 0.4),
     com_observer=(-0.31, 0.39),
@@ -150,7 +148,7 @@ ESTIMATES_PARTIAL = Estimates(
     omega=None,
     relative_positions={3: (1.0, 2.0)},
     centroid_offset=None,
-    spread=None,
+    w=None,
     moment=None,
     started={1: 0},
 )
@@ -210,11 +208,10 @@ def test_every_message_round_trips(message) -> None:
     assert type(back) is type(message)
 
 
-def test_share_centroid_presence_survives() -> None:
-    assert decode(Share, encode(SHARE_PLAIN)).centroid is None
-    assert decode(Share, encode(SHARE_CENTROID)).centroid == (1.5, -2.25)
-    at_origin = Share(sender=1, tick=1, velocity=(0, 0), degree=1, centroid=(0.0, 0.0))
-    assert decode(Share, encode(at_origin)).centroid == (0.0, 0.0)
+def test_a_shares_team_state_survives() -> None:
+    assert decode(Share, encode(SHARE_PLAIN)).team == TeamState()
+    assert decode(Share, encode(SHARE_CENTROID)).team.centroid_offset == (1.5, -2.25)
+    assert decode(Share, encode(SHARE_FLOWS)).team.mean_gain_offset == (0.04, -0.01)
 
 
 def test_estimates_keep_their_dict_keys_as_ints_and_pairs_as_tuples() -> None:
@@ -234,13 +231,13 @@ def test_status_lost_neighbours_is_a_tuple() -> None:
 
 def test_phases_travel_by_name_in_json_and_by_number_in_shares() -> None:
     assert json.loads(encode(STATUS)[3:])["phase"] == "halted"
-    assert decode(Share, encode(SHARE_CENTROID)).phase is Phase.PUSH
+    assert decode(Share, encode(SHARE_CENTROID)).barrier.phase is Phase.PUSH
 
 
 @pytest.mark.parametrize("phase", [5, 6, 200, 255])
 def test_a_share_with_no_such_phase_is_refused(phase: int) -> None:
     payload = bytearray(encode(SHARE_CENTROID))
-    at = 3 + struct.calcsize("<Hq2dHB2ddd2dd")  # the phase byte
+    at = 3 + struct.calcsize("<Hq2dHq")  # the phase byte: after sender, tick, velocity, ...
     assert payload[at] == Phase.PUSH
     payload[at] = phase
     assert "phase" in str(rejects(Share, bytes(payload)))
@@ -286,22 +283,28 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         tick=ticks,
         velocity=pairs,
         degree=small,
-        centroid=st.none() | pairs,
-        spread=numbers,
-        phase=st.sampled_from(Phase),
-        ready=st.integers(0, 2**64 - 1),
-        switch_at=ticks,
-        flows=st.lists(st.tuples(ids, *[numbers] * 9), max_size=8).map(tuple),
-        gain=st.floats(-100.0, 100.0),
-        gain_centroid=pairs,
-        gain_spread=numbers,
         instant=ticks,
-        epoch=st.integers(0, 10_000),
-        generation=st.integers(0, 10_000),
-        rotation=st.floats(-math.pi, math.pi),
-        rotation_variance=st.floats(0.0, 100.0),
-        mass_information=numbers,
-        mass_weighted=numbers,
+        barrier=st.builds(
+            Barrier,
+            phase=st.sampled_from(Phase),
+            ready=st.integers(0, 2**64 - 1),
+            switch_at=ticks,
+            load_changes=st.integers(0, 10_000),
+            rejoins=st.integers(0, 10_000),
+        ),
+        team=st.builds(
+            TeamState,
+            centroid_offset=pairs,
+            mean_square_offset=numbers,
+            mean_gain=st.floats(-100.0, 100.0),
+            mean_gain_offset=pairs,
+            mean_gain_square_offset=numbers,
+            mean_mass_information=numbers,
+            mean_weighted_mass=numbers,
+            rotation=st.floats(-math.pi, math.pi),
+            mean_turn_variance=st.floats(0.0, 100.0),
+        ),
+        flows=st.lists(st.tuples(ids, *[numbers] * 9), max_size=8).map(tuple),
     )
     maybe = lambda strategy: st.none() | strategy  # noqa: E731
     # (xx, ρ √(xx yy), yy): a covariance whenever xx, yy ≥ 0; anything, from anything.
@@ -317,7 +320,7 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         omega=maybe(numbers),
         relative_positions=st.dictionaries(ids, pairs, max_size=6),
         centroid_offset=maybe(pairs),
-        spread=maybe(numbers),
+        w=maybe(numbers),
         moment=maybe(numbers),
         com_offset=maybe(pairs),
         com_observer=maybe(pairs),
@@ -332,9 +335,9 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
         relative_positions_cov=st.dictionaries(ids, covariances, max_size=6),
         drive_gain=maybe(st.floats(0.0, 100.0)),
         drive_gain_std=maybe(numbers),
-        epoch=st.integers(0, 10_000),
+        load_changes=st.integers(0, 10_000),
         change_score=maybe(st.floats(0.0, 1e6)),
-        generation=st.integers(0, 10_000),
+        rejoins=st.integers(0, 10_000),
     )
     return st.one_of(
         st.builds(Measurement, robot=ids, tick=ticks, time_s=numbers, velocity=pairs, force=pairs),
@@ -387,14 +390,16 @@ DOMAIN_CASES = {
     "velocity of 1 km/s": Measurement(1, 1, 0.01, (1000.0, 0.0), (0.0, 0.0)),
     "share degree 0": Share(sender=2, tick=3, velocity=(0.0, 0.0), degree=0),
     "share instant not before its tick": Share(2, 3, (0.0, 0.0), 1, instant=3),
-    "share switch below -1": Share(2, 3, (0.0, 0.0), 1, switch_at=-7),
-    "share mean gain of 1000": Share(2, 3, (0.0, 0.0), 1, gain=1000.0),
+    "share switch below -1": Share(2, 3, (0.0, 0.0), 1, barrier=Barrier(switch_at=-7)),
+    "share mean gain of 1000": Share(2, 3, (0.0, 0.0), 1, team=TeamState(mean_gain=1000.0)),
     "estimates with a negative drive gain": Estimates(1, 3, Phase.DONE, drive_gain=-1.0),
     "estimates with a negative gain std": Estimates(1, 3, Phase.DONE, drive_gain_std=-0.1),
     "share with more flows than neighbours": Share(
         2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * 9), (3, *[0.0] * 9))
     ),
-    "share centroid 1e5 m away": Share(2, 3, (0.0, 0.0), 1, centroid=(1e5, 0.0)),
+    "share centroid 1e5 m away": Share(
+        2, 3, (0.0, 0.0), 1, team=TeamState(centroid_offset=(1e5, 0.0))
+    ),
 }
 
 
@@ -514,12 +519,12 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
         _with(COMMAND, force=(1.0, bad)),
         _with(CLOCK, time_s=bad),
         _with(SHARE_PLAIN, velocity=(bad, 0.0)),
-        _with(SHARE_PLAIN, spread=bad),
-        _with(SHARE_CENTROID, centroid=(0.0, bad)),
+        _with(SHARE_PLAIN, team=TeamState(mean_square_offset=bad)),
+        _with(SHARE_CENTROID, team=TeamState(centroid_offset=(0.0, bad))),
         _with(SHARE_FLOWS, flows=((2, 0.5, bad, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),)),
         _with(SHARE_FLOWS, flows=((2, *[0.5] * 9), (4, *[0.0] * 8, bad))),
-        _with(SHARE_FLOWS, gain=bad),
-        _with(SHARE_FLOWS, gain_centroid=(0.0, bad)),
+        _with(SHARE_FLOWS, team=TeamState(mean_gain=bad)),
+        _with(SHARE_FLOWS, team=TeamState(mean_gain_offset=(0.0, bad))),
         _with(ESTIMATES_FULL, mass=bad),
         _with(ESTIMATES_FULL, contact_to_com=(0.0, bad)),
         _with(ESTIMATES_PARTIAL, omega=bad),
@@ -547,7 +552,7 @@ def test_share_flow_count_must_match_its_bytes() -> None:
 
 ESTIMATES_FIXED = struct.Struct("<HqBqHBBBBHH")
 """robot, tick, phase, phase_since, presence bits, neighbours, covariances, started, settled,
-epoch, generation."""
+load changes, rejoins."""
 
 
 def _estimates_fixed(message: Estimates, **changes) -> bytes:
@@ -565,8 +570,8 @@ def _estimates_fixed(message: Estimates, **changes) -> bytes:
                 "covariances",
                 "started",
                 "settled",
-                "epoch",
-                "generation",
+                "load_changes",
+                "rejoins",
             ),
             ESTIMATES_FIXED.unpack_from(payload, 3),
             strict=True,
