@@ -144,7 +144,7 @@ class Agent:
             degree=consensus.degree,
             instant=pipeline.instant,
             barrier=phases.barrier.state,
-            team=pipeline.team_state(),
+            consensus=pipeline.consensus_state(),
             flows=consensus.shared_flows(),
         )
         before = k - HISTORY_TICKS

@@ -81,7 +81,7 @@ def usable(share: Share, tick: int) -> bool:
     vx, vy = share.velocity
     total = vx - vx + vy - vy
     # x - x == 0 exactly for every finite float, and is NaN for NaN and ±inf.
-    for value in share.team:
+    for value in share.consensus:
         if type(value) is tuple:
             total += value[0] - value[0] + value[1] - value[1]
         else:

@@ -326,9 +326,9 @@ class EstimationPipeline:
         self._angle_at.pop(before - 1, None)
 
     # ---------------------------------------------------------------- reporting
-    def team_state(self):
+    def consensus_state(self):
         """This robot's states of the team's quantities, to share
-        (:class:`~agent.platform.team.TeamState`)."""
+        (:class:`~agent.platform.team.ConsensusState`)."""
         return self.consensus.state
 
     def estimates(self, robot: int, schedule: Schedule) -> Estimates:

@@ -38,7 +38,7 @@ import orjson as _orjson
 from agent.platform import team as _team
 from agent.platform.config import ConfigError, from_table
 from agent.platform.geometry import Vec2
-from agent.platform.team import TeamState
+from agent.platform.team import ConsensusState
 
 Cov2 = tuple[float, float, float]
 """A 2×2 covariance ``(xx, xy, yy)``."""
@@ -113,7 +113,7 @@ class Share:
 
     ``velocity`` is the sender's sample of ``tick``; ``degree`` its number of neighbours
     (Metropolis consensus weights); ``barrier`` its view of the team's phase barrier.
-    ``team`` holds its states of the team's quantities (:data:`agent.platform.team.
+    ``consensus`` holds its states of the team's quantities (:data:`agent.platform.team.
     TEAM_QUANTITIES`, declared there once), which refer to the sender's *estimation instant*
     ``instant`` (the newest instant for which it had its neighbours' velocities: ``tick - 1``
     unless messages were late; ``-1`` before any); vectors are in ``W`` at that instant.
@@ -128,7 +128,7 @@ class Share:
     degree: int
     instant: int = -1
     barrier: Barrier = Barrier()
-    team: TeamState = TeamState()
+    consensus: ConsensusState = ConsensusState()
     flows: tuple[tuple[float, ...], ...] = ()
 
 
@@ -842,7 +842,7 @@ class ShareWire:
         self, quantities: tuple[_team.TeamQuantity, ...] = _team.TEAM_QUANTITIES, state_type=None
     ):
         self.quantities = tuple(quantities)
-        self.state_type = state_type or _team.team_state_type(self.quantities)
+        self.state_type = state_type or _team.consensus_state_type(self.quantities)
         self.fixed = _struct.Struct(f"<Hq2dHqBQqHHH{_team.width(self.quantities)}dB")
         self.flow = _struct.Struct(f"<H{_team.flow_width(self.quantities)}d")
         self.flow_fields = 1 + _team.flow_width(self.quantities)
@@ -864,7 +864,7 @@ class ShareWire:
             b.load_changes,
             b.rejoins,
             self.layout,
-            *_team.flatten(m.team, self.quantities),
+            *_team.flatten(m.consensus, self.quantities),
             len(m.flows),
         )
         return fixed + b"".join(self.flow.pack(*f) for f in m.flows)
@@ -891,8 +891,8 @@ class ShareWire:
             for i in range(0, len(rest), flow.size)
         )
         barrier = Barrier(_phase(phase, "share"), ready, switch_at, changes, rejoins)
-        team = self.state_type(*_team.grouped(values[12:-1], self.quantities))
-        return Share(sender, tick, (vx, vy), degree, instant, barrier, team, flows)
+        consensus = self.state_type(*_team.grouped(values[12:-1], self.quantities))
+        return Share(sender, tick, (vx, vy), degree, instant, barrier, consensus, flows)
 
     def check(self, m: Share) -> None:
         """:class:`DecodeError` naming the field unless every field is within its domain."""
@@ -905,11 +905,11 @@ class ShareWire:
         _within("share.barrier.switch_at", b.switch_at, -1, MAX_TICK)
         _within("share.barrier.load_changes", b.load_changes, 0, MAX_LOAD_CHANGES)
         _within("share.barrier.rejoins", b.rejoins, 0, MAX_REJOINS)
-        if len(m.team) != len(self.quantities):
+        if len(m.consensus) != len(self.quantities):
             raise DecodeError(
-                f"share.team: {len(m.team)} quantities, expected {len(self.quantities)}"
+                f"share.consensus: {len(m.consensus)} quantities, expected {len(self.quantities)}"
             )
-        outside = _team.check_state(m.team, self.quantities, "share.team")
+        outside = _team.check_state(m.consensus, self.quantities, "share.consensus")
         if outside is not None:
             raise DecodeError(outside)
         _within("share.flows (how many)", len(m.flows), 0, m.degree)
@@ -923,7 +923,7 @@ class ShareWire:
                 _within("share.flows", f, -MAX_FLOW, MAX_FLOW)
 
 
-SHARE_WIRE = ShareWire(_team.TEAM_QUANTITIES, TeamState)
+SHARE_WIRE = ShareWire(_team.TEAM_QUANTITIES, ConsensusState)
 """The wire of :class:`Share` for the team's quantities."""
 
 

@@ -4,7 +4,7 @@ Every quantity the robots agree on by consensus is one :class:`TeamQuantity` in
 :data:`TEAM_QUANTITIES`: its name, its shape (a number or a planar vector), the bound of its
 domain and how the team averages it. Everything else follows from the declaration:
 
-- the consensus part of each :class:`~agent.platform.protocol.Share` (its :class:`TeamState`,
+- the consensus part of each :class:`~agent.platform.protocol.Share` (its :class:`ConsensusState`,
   one field per quantity) and, for the quantities averaged in flow form, one flow per edge
   (:func:`flow_width` numbers after the neighbour's id);
 - the share's wire layout, its layout code (:func:`layout_code`, checked on decoding: robots
@@ -64,7 +64,7 @@ class TeamQuantity:
     """One quantity the team averages (see the module docstring)."""
 
     name: str
-    """The field of :class:`TeamState` (and so of the wire)."""
+    """The field of :class:`ConsensusState` (and so of the wire)."""
     shape: int
     """1: a number; 2: a planar vector ``(x, y)`` in ``W`` at the sender's estimation instant."""
     bound: float
@@ -162,16 +162,16 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
 """The team's quantities, in wire order."""
 
 
-def team_state_type(quantities: Sequence[TeamQuantity] = TEAM_QUANTITIES) -> type:
+def consensus_state_type(quantities: Sequence[TeamQuantity] = TEAM_QUANTITIES) -> type:
     """The immutable record of one robot's states of ``quantities`` (a named tuple: fields by
     name, in declaration order; every field defaults to its quantity's initial value)."""
     names = [q.name for q in quantities]
     if len(set(names)) != len(names):
         raise ValueError(f"team quantities named twice: {names}")
-    return namedtuple("TeamState", names, defaults=[q.initial for q in quantities])
+    return namedtuple("ConsensusState", names, defaults=[q.initial for q in quantities])
 
 
-TeamState = team_state_type(TEAM_QUANTITIES)
+ConsensusState = consensus_state_type(TEAM_QUANTITIES)
 """One robot's states of :data:`TEAM_QUANTITIES` (``Share.team``)."""
 
 

@@ -47,8 +47,8 @@ from agent.platform.team import (
     TEAM_QUANTITIES,
     Averaging,
     TeamQuantity,
+    consensus_state_type,
     flatten,
-    team_state_type,
 )
 
 if TYPE_CHECKING:
@@ -101,7 +101,7 @@ class TeamConsensus:
             raise ValueError("the first flow-form quantity must be the offsets (Step 2)")
         if any(q.averaging is Averaging.OFFSETS for q in self.flowing[1:]):
             raise ValueError("one offsets quantity")
-        self._state_type = team_state_type(self.quantities)
+        self._state_type = consensus_state_type(self.quantities)
         self._index = {q.name: i for i, q in enumerate(self.quantities)}
         self._slots = tuple(self._index[q.name] for q in self.flowing)
         """Where each flow-form quantity is in :attr:`state`."""
@@ -148,7 +148,8 @@ class TeamConsensus:
 
     @property
     def state(self):
-        """Every declared quantity's state, as shared (:class:`~agent.platform.team.TeamState`)."""
+        """Every declared quantity's state, as shared
+        (:class:`~agent.platform.team.ConsensusState`)."""
         flowing = self._grouped()
         values = list(self._other.get(i) for i in range(len(self.quantities)))
         for slot, value in zip(self._slots, flowing):
@@ -192,9 +193,9 @@ class TeamConsensus:
                 continue
             a = metropolis_weight(self.degree, s.degree)
             theirs = []
-            team = s.team
+            theirs_state = s.consensus
             for q, slot in zip(self.flowing, slots):
-                value = team[slot]
+                value = theirs_state[slot]
                 if q.shape == 1:
                     theirs.append(value)
                 elif not q.turns:

@@ -160,7 +160,7 @@ class RobustPipeline(EstimationPipeline):
             turns.append((edge.last_turn, weight))
         own = own_turn(turns)
         heard = (
-            (j, s.degree, s.instant, s.team.rotation, s.team.mean_turn_variance)
+            (j, s.degree, s.instant, s.consensus.rotation, s.consensus.mean_turn_variance)
             for j, s in inbox.latest.items()
             if j in self.edges
         )
@@ -270,7 +270,7 @@ class RobustPipeline(EstimationPipeline):
         return mass_std / mass, cov
 
     # ---------------------------------------------------------------- reporting
-    def team_state(self):
+    def consensus_state(self):
         """The consensus' states, with this robot's level of the load's rotation (sent modulo
         ``2π``) and its state of the turns' mean variance."""
         consensus = self.consensus

@@ -39,7 +39,7 @@ from agent.algorithm.robust.team_mass import MAX_MASS_INFORMATION, inputs, mass_
 from agent.algorithm.safety import saturate
 from agent.platform.geometry import angle_between, arc_factor, cross, rotate
 from agent.platform.protocol import Share
-from agent.platform.team import TeamState
+from agent.platform.team import ConsensusState
 
 Q = np.array([[0.0, -1.0], [1.0, 0.0]])
 FAST = settings(max_examples=50, deadline=None)
@@ -500,7 +500,7 @@ def message(i: int, t: int, c: Member) -> Share:
         velocity=(0.0, 0.0),
         degree=c.degree,
         instant=t,
-        team=c.state,
+        consensus=c.state,
         flows=c.shared_flows(),
     )
 
@@ -666,11 +666,11 @@ def test_centroid_consensus_one_update_by_hand():
     frame.instant = t
     c = Member(0, (1, 2))
     x1, x2 = (0.4, -0.3), (-1.1, 0.7)
-    team1 = TeamState(centroid_offset=x1, mean_square_offset=0.8)
-    team2 = TeamState(centroid_offset=x2, mean_square_offset=-0.2)
+    team1 = ConsensusState(centroid_offset=x1, mean_square_offset=0.8)
+    team2 = ConsensusState(centroid_offset=x2, mean_square_offset=-0.2)
     shares = {
-        1: Share(sender=1, tick=t - 1, velocity=(0, 0), degree=2, instant=t - 1, team=team1),
-        2: Share(sender=2, tick=t - 1, velocity=(0, 0), degree=3, instant=t - 3, team=team2),
+        1: Share(sender=1, tick=t - 1, velocity=(0, 0), degree=2, instant=t - 1, consensus=team1),
+        2: Share(sender=2, tick=t - 1, velocity=(0, 0), degree=3, instant=t - 3, consensus=team2),
     }
     c.update(phi, shares, frame)
     a1, a2 = 1 / 3, 1 / 4
@@ -694,7 +694,7 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
         velocity=(0, 0),
         degree=1,
         # x_j where this robot's x_i will be: the iteration's own term is nil.
-        team=TeamState(centroid_offset=(0.5, -1.0), mean_square_offset=2.0),
+        consensus=ConsensusState(centroid_offset=(0.5, -1.0), mean_square_offset=2.0),
         flows=((0, 0.5, -1.0, 0.25, *[0.0] * 6),),
         instant=t - 2,
     )

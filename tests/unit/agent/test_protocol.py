@@ -34,7 +34,7 @@ from agent.platform.protocol import (
     decode,
     encode,
 )
-from agent.platform.team import TeamState
+from agent.platform.team import ConsensusState
 
 STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
 JSON_CLASSES = (Status, Truth, Control, PlantStatus, BridgeStatus)
@@ -86,7 +86,7 @@ SHARE_CENTROID = Share(
     velocity=(-0.5, 0.75),
     degree=1,
     barrier=Barrier(phase=Phase.PUSH, ready=0b1011, switch_at=620),
-    team=TeamState(centroid_offset=(1.5, -2.25), mean_square_offset=3.125),
+    consensus=ConsensusState(centroid_offset=(1.5, -2.25), mean_square_offset=3.125),
 )
 SHARE_FLOWS = Share(
     sender=3,
@@ -94,7 +94,7 @@ SHARE_FLOWS = Share(
     velocity=(1e-9, -100.0),
     degree=2,
     barrier=Barrier(phase=Phase.INERTIA, ready=2**64 - 1, switch_at=-1),
-    team=TeamState(
+    consensus=ConsensusState(
         mean_square_offset=0.5,
         mean_gain=1.02,
         mean_gain_offset=(0.04, -0.01),
@@ -209,7 +209,7 @@ def test_every_message_round_trips(message) -> None:
 
 
 def test_a_shares_team_state_survives() -> None:
-    assert decode(Share, encode(SHARE_PLAIN)).team == TeamState()
+    assert decode(Share, encode(SHARE_PLAIN)).team == ConsensusState()
     assert decode(Share, encode(SHARE_CENTROID)).team.centroid_offset == (1.5, -2.25)
     assert decode(Share, encode(SHARE_FLOWS)).team.mean_gain_offset == (0.04, -0.01)
 
@@ -292,8 +292,8 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
             load_changes=st.integers(0, 10_000),
             rejoins=st.integers(0, 10_000),
         ),
-        team=st.builds(
-            TeamState,
+        consensus=st.builds(
+            ConsensusState,
             centroid_offset=pairs,
             mean_square_offset=numbers,
             mean_gain=st.floats(-100.0, 100.0),
@@ -391,14 +391,16 @@ DOMAIN_CASES = {
     "share degree 0": Share(sender=2, tick=3, velocity=(0.0, 0.0), degree=0),
     "share instant not before its tick": Share(2, 3, (0.0, 0.0), 1, instant=3),
     "share switch below -1": Share(2, 3, (0.0, 0.0), 1, barrier=Barrier(switch_at=-7)),
-    "share mean gain of 1000": Share(2, 3, (0.0, 0.0), 1, team=TeamState(mean_gain=1000.0)),
+    "share mean gain of 1000": Share(
+        2, 3, (0.0, 0.0), 1, consensus=ConsensusState(mean_gain=1000.0)
+    ),
     "estimates with a negative drive gain": Estimates(1, 3, Phase.DONE, drive_gain=-1.0),
     "estimates with a negative gain std": Estimates(1, 3, Phase.DONE, drive_gain_std=-0.1),
     "share with more flows than neighbours": Share(
         2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * 9), (3, *[0.0] * 9))
     ),
     "share centroid 1e5 m away": Share(
-        2, 3, (0.0, 0.0), 1, team=TeamState(centroid_offset=(1e5, 0.0))
+        2, 3, (0.0, 0.0), 1, consensus=ConsensusState(centroid_offset=(1e5, 0.0))
     ),
 }
 
@@ -519,12 +521,12 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
         _with(COMMAND, force=(1.0, bad)),
         _with(CLOCK, time_s=bad),
         _with(SHARE_PLAIN, velocity=(bad, 0.0)),
-        _with(SHARE_PLAIN, team=TeamState(mean_square_offset=bad)),
-        _with(SHARE_CENTROID, team=TeamState(centroid_offset=(0.0, bad))),
+        _with(SHARE_PLAIN, consensus=ConsensusState(mean_square_offset=bad)),
+        _with(SHARE_CENTROID, consensus=ConsensusState(centroid_offset=(0.0, bad))),
         _with(SHARE_FLOWS, flows=((2, 0.5, bad, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),)),
         _with(SHARE_FLOWS, flows=((2, *[0.5] * 9), (4, *[0.0] * 8, bad))),
-        _with(SHARE_FLOWS, team=TeamState(mean_gain=bad)),
-        _with(SHARE_FLOWS, team=TeamState(mean_gain_offset=(0.0, bad))),
+        _with(SHARE_FLOWS, consensus=ConsensusState(mean_gain=bad)),
+        _with(SHARE_FLOWS, consensus=ConsensusState(mean_gain_offset=(0.0, bad))),
         _with(ESTIMATES_FULL, mass=bad),
         _with(ESTIMATES_FULL, contact_to_com=(0.0, bad)),
         _with(ESTIMATES_PARTIAL, omega=bad),

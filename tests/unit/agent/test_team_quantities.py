@@ -28,10 +28,10 @@ from agent.platform.protocol import (
 from agent.platform.team import (
     TEAM_QUANTITIES,
     Averaging,
+    ConsensusState,
     TeamQuantity,
-    TeamState,
+    consensus_state_type,
     flow_width,
-    team_state_type,
 )
 
 TEMPERATURE = TeamQuantity(
@@ -103,13 +103,13 @@ def run_team(ticks: int, drop: float = 0.0, seed: int = 1) -> dict[int, TeamCons
 
 
 def test_a_new_quantity_crosses_the_wire_and_is_checked() -> None:
-    state = team_state_type(EXTENDED)(centroid_offset=(0.5, -0.25), mean_temperature=23.5)
+    state = consensus_state_type(EXTENDED)(centroid_offset=(0.5, -0.25), mean_temperature=23.5)
     share = Share(3, 9, (0.1, 0.0), 2, 8, Barrier(Phase.INERTIA, 5, 12), state, ((2, *[0.5] * 10),))
     assert flow_width(EXTENDED) == flow_width() + 1  # a flow-form mean: one more flow number
     assert WIRE.unpack(WIRE.pack(share)) == share
     WIRE.check(share)
-    hot = dataclasses.replace(share, team=state._replace(mean_temperature=1e4))
-    with pytest.raises(DecodeError, match=r"share\.team\.mean_temperature = 10000\.0 is outside"):
+    hot = dataclasses.replace(share, consensus=state._replace(mean_temperature=1e4))
+    with pytest.raises(DecodeError, match=r"share\.consensus\.mean_temperature = 10000\.0 is outside"):
         WIRE.check(hot)
     # Robots that declare different quantities refuse each other's shares, and say why.
     with pytest.raises(DecodeError, match="team quantities of layout"):
@@ -131,12 +131,14 @@ def test_a_new_quantity_is_averaged_by_the_consensus_and_its_sum_kept_through_lo
 
 
 def test_the_declared_quantities_are_the_shares_fields_and_domains() -> None:
-    assert TeamState._fields == tuple(q.name for q in TEAM_QUANTITIES)
-    far = TeamState(centroid_offset=(20_000.0, 0.0))
+    assert ConsensusState._fields == tuple(q.name for q in TEAM_QUANTITIES)
+    far = ConsensusState(centroid_offset=(20_000.0, 0.0))
     share = Share(1, 2, (0.0, 0.0), 1, 1, Barrier(), far)
-    with pytest.raises(DecodeError, match=r"share\.team\.centroid_offset"):
+    with pytest.raises(DecodeError, match=r"share\.consensus\.centroid_offset"):
         decode(Share, encode(share))
-    ok = Share(1, 2, (0.0, 0.0), 1, 1, Barrier(), TeamState(rotation=math.pi))
+    ok = Share(1, 2, (0.0, 0.0), 1, 1, Barrier(), ConsensusState(rotation=math.pi))
     assert decode(Share, encode(ok)) == ok
-    with pytest.raises(DecodeError, match=r"share\.team\.rotation"):
-        decode(Share, encode(Share(1, 2, (0.0, 0.0), 1, 1, Barrier(), TeamState(rotation=3.2))))
+    with pytest.raises(DecodeError, match=r"share\.consensus\.rotation"):
+        decode(
+            Share, encode(Share(1, 2, (0.0, 0.0), 1, 1, Barrier(), ConsensusState(rotation=3.2)))
+        )

@@ -14,6 +14,7 @@ import pytest
 
 from agent.platform.protocol import (
     KINDS,
+    Barrier,
     BridgeStatus,
     Clock,
     Command,
@@ -29,6 +30,7 @@ from agent.platform.protocol import (
     Truth,
     encode,
 )
+from agent.platform.team import ConsensusState
 from dashboard import channels
 from dashboard.geometry import GeometryError, LoadGeometry
 from dashboard.state import KEEP_TICKS, MAX_SEGMENTS, TeamState
@@ -280,13 +282,10 @@ EXAMPLES = [
         7,
         (0.1, 0.2),
         2,
-        (1.0, 2.0),
-        3.0,
-        Phase.INERTIA,
-        3,
-        9,
-        ((1, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.4, 2.0, 10.0),),
         6,
+        Barrier(Phase.INERTIA, 3, 9),
+        ConsensusState(centroid_offset=(1.0, 2.0), mean_square_offset=3.0),
+        ((1, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.4, 2.0, 10.0),),
     ),
     Clock(7, 0.07),
     Estimates(2, 7, Phase.PUSH, 5, 0.4, {1: (1.0, 2.0)}, (0.5, 0.5), 2.0, 12.0, mass=5.0),
