@@ -57,7 +57,7 @@ def forged_messages(rng: random.Random, n: int, tick: int) -> list[tuple[str, by
 def share_with_phase(share: Share, phase: int) -> bytes:
     """``share`` encoded, its phase byte then set to ``phase`` (which may name no phase)."""
     payload = bytearray(encode(share))
-    at = 3 + struct.calcsize("<Hq2dHB2ddd2dd")  # the phase byte
-    assert payload[at] == share.phase  # (fails if the layout moves it)
+    at = 3 + struct.calcsize("<Hq2dHq")  # the phase byte: after sender ... instant
+    assert payload[at] == share.barrier.phase  # (fails if the layout moves it)
     payload[at] = phase
     return bytes(payload)

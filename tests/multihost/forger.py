@@ -21,6 +21,7 @@ import time
 
 from agent.platform.protocol import (
     WIRE_VERSION,
+    Barrier,
     Command,
     Control,
     Estimates,
@@ -66,7 +67,7 @@ def _adversarial(rng: random.Random, topic: str, robot: int, n: int) -> bytes:
             Share(robot, 10, (0.0, 0.0), 0),
             Share(robot, 10, (0.0, 0.0), 1, instant=10),
             Share(n + 7, 10, (0.0, 0.0), 1),
-            Share(robot, 10, (0.0, 0.0), 1, generation=60_000),
+            Share(robot, 10, (0.0, 0.0), 1, barrier=Barrier(rejoins=60000)),
         ],
         "estimate": [
             Estimates(n + 5, 10, Phase.DONE),

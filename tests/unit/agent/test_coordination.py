@@ -14,7 +14,7 @@ from collections.abc import Callable
 import pytest
 
 from agent.algorithm.coordination import PhaseBarrier
-from agent.platform.protocol import Phase, Share
+from agent.platform.protocol import Barrier, Phase, Share
 from agent.platform.transport import InMemoryTransport, neighbour_map
 
 MARGIN = 3
@@ -78,7 +78,7 @@ class Team:
                 inbox[i] = [s for s in shares if not self.drop(tick, s.sender, i)]
             for i, b in self.barriers.items():
                 before = b.phase
-                changed = b.step(tick, self.own_ready(i), inbox[i])
+                changed = b.step(tick, self.own_ready(i), [s.barrier for s in inbox[i]])
                 assert changed == (b.phase != before)
                 assert b.phase >= before
                 if changed:
@@ -92,9 +92,7 @@ class Team:
                         tick=tick,
                         velocity=(0.0, 0.0),
                         degree=degree,
-                        phase=b.phase,
-                        ready=b.ready,
-                        switch_at=b.switch_at,
+                        barrier=Barrier(phase=b.phase, ready=b.ready, switch_at=b.switch_at),
                     )
                 )
             self.tick += 1
@@ -215,24 +213,24 @@ def test_barrier_step_by_hand():
     b = PhaseBarrier(1, 2, 0)
     assert b.step(0, True, []) is False
     assert b.ready == 0b01 and b.switch_at == -1
-    share = Share(sender=2, tick=0, velocity=(0.0, 0.0), degree=1, ready=0b10)
-    assert b.step(1, False, [share]) is False
+    view = Barrier(ready=0b10)  # robot 2's view of the barrier
+    assert b.step(1, False, [view]) is False
     assert b.ready == 0b11 and b.switch_at == 1 + 2
     assert b.step(2, False, []) is False
     assert b.step(3, False, []) is True
     assert b.phase is Phase.INERTIA and b.ready == 0 and b.switch_at == -1
     # A neighbour already two phases on: catch up at once, own readiness not counted.
-    ahead = Share(sender=2, tick=3, velocity=(0.0, 0.0), degree=1, phase=Phase.DONE, ready=0b10)
+    ahead = Barrier(phase=Phase.DONE, ready=0b10)
     assert b.step(4, True, [ahead]) is True
     assert b.phase is Phase.DONE and b.ready == 0b10
-    # Shares of an earlier phase are ignored.
-    stale = Share(sender=2, tick=4, velocity=(0.0, 0.0), degree=1, phase=Phase.INERTIA, ready=0b11)
+    # Views of an earlier phase are ignored.
+    stale = Barrier(phase=Phase.INERTIA, ready=0b11)
     assert b.step(5, False, [stale]) is False
     assert b.phase is Phase.DONE and b.ready == 0b10
     # The earlier of two proposals wins.
     c = PhaseBarrier(1, 2, 0)
-    late = Share(sender=2, tick=0, velocity=(0.0, 0.0), degree=1, ready=0b11, switch_at=9)
-    early = Share(sender=2, tick=0, velocity=(0.0, 0.0), degree=1, ready=0b11, switch_at=6)
+    late = Barrier(ready=0b11, switch_at=9)
+    early = Barrier(ready=0b11, switch_at=6)
     c.step(5, False, [late, early])
     assert c.switch_at == 6
 

@@ -13,7 +13,7 @@ import pytest
 
 from agent.algorithm.coordination import PhaseBarrier
 from agent.algorithm.robust.load_change import ProbeFit
-from agent.platform.protocol import Phase, Share, decode, encode
+from agent.platform.protocol import Barrier, Phase, Share, decode, encode
 from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
 from simulator.inprocess import run_inprocess
@@ -161,33 +161,44 @@ def test_one_robot_restarts_the_team_and_every_robot_restarts_at_the_same_tick()
     for tick in range(20):
         sent = []
         for i, b in barriers.items():
-            if b.step(tick, i == 3 and tick >= 4, heard[i]) and b.phase == Phase.INERTIA:
+            if (
+                b.step(tick, i == 3 and tick >= 4, [s.barrier for s in heard[i]])
+                and b.phase == Phase.INERTIA
+            ):
                 switched[i] = tick
             sent.append(
-                Share(i, tick, (0.0, 0.0), 1, phase=b.phase, switch_at=b.switch_at, epoch=b.epoch)
+                Share(
+                    i,
+                    tick,
+                    (0.0, 0.0),
+                    1,
+                    barrier=Barrier(
+                        phase=b.phase, switch_at=b.switch_at, load_changes=b.load_changes
+                    ),
+                )
             )
         # the line 1 - 2 - 3: each hears its neighbours' last messages
         heard = {i: [s for s in sent if abs(s.sender - i) == 1] for i in barriers}
     assert set(switched) == {1, 2, 3} and len(set(switched.values())) == 1
-    assert all(b.epoch == 1 and b.phase == Phase.INERTIA for b in barriers.values())
+    assert all(b.load_changes == 1 and b.phase == Phase.INERTIA for b in barriers.values())
 
 
 def test_a_later_epoch_is_caught_up_with_and_halted_beats_every_epoch() -> None:
     b = PhaseBarrier(1, 2, 0)
     b.phase = Phase.DONE
-    b.step(10, False, [Share(2, 9, (0.0, 0.0), 1, phase=Phase.EXCITE, epoch=2)])
-    assert (b.phase, b.epoch) == (Phase.EXCITE, 2)
-    b.step(11, False, [Share(2, 10, (0.0, 0.0), 1, phase=Phase.DONE, epoch=1)])
-    assert (b.phase, b.epoch) == (Phase.EXCITE, 2)  # an older epoch is not gone back to
-    b.step(12, False, [Share(2, 11, (0.0, 0.0), 1, phase=Phase.HALTED, epoch=0)])
+    b.step(10, False, [Barrier(phase=Phase.EXCITE, load_changes=2)])
+    assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)
+    b.step(11, False, [Barrier(phase=Phase.DONE, load_changes=1)])
+    assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)  # an older epoch is not gone back to
+    b.step(12, False, [Barrier(phase=Phase.HALTED, load_changes=0)])
     assert b.phase == Phase.HALTED
 
 
 def test_the_epoch_crosses_the_wire_and_is_domain_checked() -> None:
-    share = Share(1, 5, (0.0, 0.0), 1, epoch=7)
-    assert decode(Share, encode(share)).epoch == 7
-    with pytest.raises(ValueError, match="share.epoch"):
-        decode(Share, encode(dataclasses.replace(share, epoch=60_000)))
+    share = Share(1, 5, (0.0, 0.0), 1, barrier=Barrier(load_changes=7))
+    assert decode(Share, encode(share)).barrier.load_changes == 7
+    with pytest.raises(ValueError, match="share.load_changes"):
+        decode(Share, encode(dataclasses.replace(share, barrier=Barrier(load_changes=60_000))))
 
 
 # ------------------------------------------------------------------------------ end to end
@@ -214,7 +225,7 @@ def test_a_changed_load_is_noticed_within_5_s_and_estimated_again(seed, change) 
     truth = outcome.final.truth
     assert truth.mass == pytest.approx(change.get("mass", 5.0))
     for est in outcome.final.estimates.values():
-        assert est.epoch == 1
+        assert est.load_changes == 1
         assert abs(est.mass / truth.mass - 1.0) < 0.03
         assert abs(est.moment / truth.moment - 1.0) < 0.05
         assert math.dist(est.contact_to_com, truth.contact_to_com[est.robot - 1]) < 0.04
@@ -227,7 +238,7 @@ def test_a_changed_load_is_noticed_within_5_s_and_estimated_again(seed, change) 
         for est in sample.estimates.values():
             state.ingest(est, sample.truth.time_s)
     assert state.final is not None and state.final["tick"] == outcome.final.truth.tick
-    assert {row["epoch"] for row in state.final["robots"].values()} == {1}
+    assert {row["load_changes"] for row in state.final["robots"].values()} == {1}
 
 
 def test_an_unchanged_load_raises_no_alarm_while_it_is_watched() -> None:

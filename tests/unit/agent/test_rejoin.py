@@ -9,7 +9,7 @@ import dataclasses
 import pytest
 
 from agent.algorithm.coordination import PhaseBarrier
-from agent.platform.protocol import Phase, Share, decode, encode
+from agent.platform.protocol import Barrier, Phase, Share, decode, encode
 from agent.platform.transport import InMemoryTransport
 from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
@@ -26,11 +26,13 @@ def _share(i: int, tick: int, b: PhaseBarrier) -> Share:
         tick,
         (0.0, 0.0),
         1,
-        phase=b.phase,
-        ready=b.ready,
-        switch_at=b.switch_at,
-        epoch=b.epoch,
-        generation=b.generation,
+        barrier=Barrier(
+            phase=b.phase,
+            ready=b.ready,
+            switch_at=b.switch_at,
+            load_changes=b.load_changes,
+            rejoins=b.rejoins,
+        ),
     )
 
 
@@ -47,7 +49,7 @@ def _line(n: int, ticks: int, back: dict[int, int], halted_from: int = 0):
             if tick == halted_from:
                 b.halt()
             ready = b.phase == Phase.HALTED and tick >= back[i]
-            if b.step(tick, ready, heard[i]) and b.generation == 1:
+            if b.step(tick, ready, [s.barrier for s in heard[i]]) and b.rejoins == 1:
                 began.setdefault(i, tick)
             sent.append(_share(i, tick, b))
         heard = {i: [s for s in sent if abs(s.sender - i) == 1] for i in barriers}
@@ -59,36 +61,38 @@ def test_a_halted_team_begins_again_together_once_every_robot_is_back() -> None:
     barriers, began = _line(4, 60, back)
     assert set(began) == {1, 2, 3, 4} and len(set(began.values())) == 1
     assert min(began.values()) > max(back.values())  # not before the last robot is back
-    assert all((b.phase, b.epoch, b.generation) == (Phase.EXCITE, 0, 1) for b in barriers.values())
+    assert all(
+        (b.phase, b.load_changes, b.rejoins) == (Phase.EXCITE, 0, 1) for b in barriers.values()
+    )
 
 
 def test_a_halted_team_waits_for_its_last_robot() -> None:
     barriers, began = _line(4, 60, {1: 0, 2: 0, 3: 0, 4: 10_000})
     assert began == {}
-    assert all(b.phase == Phase.HALTED and b.generation == 0 for b in barriers.values())
+    assert all(b.phase == Phase.HALTED and b.rejoins == 0 for b in barriers.values())
 
 
 def test_a_later_generation_is_caught_up_with_and_an_earlier_one_is_ignored() -> None:
     b = PhaseBarrier(1, 2, 0)
     b.phase = Phase.HALTED
-    b.step(10, False, [Share(2, 9, (0.0, 0.0), 1, phase=Phase.EXCITE, generation=2)])
-    assert (b.phase, b.generation) == (Phase.EXCITE, 2)  # it missed the agreed tick
-    b.step(11, True, [Share(2, 10, (0.0, 0.0), 1, phase=Phase.DONE, generation=1)])
-    assert (b.phase, b.generation) == (Phase.EXCITE, 2)
+    b.step(10, False, [Barrier(phase=Phase.EXCITE, rejoins=2)])
+    assert (b.phase, b.rejoins) == (Phase.EXCITE, 2)  # it missed the agreed tick
+    b.step(11, True, [Barrier(phase=Phase.DONE, rejoins=1)])
+    assert (b.phase, b.rejoins) == (Phase.EXCITE, 2)
     assert b.ready == 0b01  # its own readiness only: the old generation's bits are not merged
 
 
 def test_a_new_process_catches_up_with_a_halted_team() -> None:
     fresh = PhaseBarrier(3, 4, 2)  # a robot's agent restarted: generation 0, excite
-    fresh.step(0, False, [Share(2, 4000, (0.0, 0.0), 1, phase=Phase.HALTED, generation=3)])
-    assert (fresh.phase, fresh.generation) == (Phase.HALTED, 3)
+    fresh.step(0, False, [Barrier(phase=Phase.HALTED, rejoins=3)])
+    assert (fresh.phase, fresh.rejoins) == (Phase.HALTED, 3)
 
 
 def test_the_generation_crosses_the_wire_and_is_domain_checked() -> None:
-    share = Share(1, 5, (0.0, 0.0), 1, generation=7)
-    assert decode(Share, encode(share)).generation == 7
-    with pytest.raises(ValueError, match="share.generation"):
-        decode(Share, encode(dataclasses.replace(share, generation=60_000)))
+    share = Share(1, 5, (0.0, 0.0), 1, barrier=Barrier(rejoins=7))
+    assert decode(Share, encode(share)).barrier.rejoins == 7
+    with pytest.raises(ValueError, match="share.rejoins"):
+        decode(Share, encode(dataclasses.replace(share, barrier=Barrier(rejoins=60_000))))
 
 
 # ------------------------------------------------------------------------------ agents
@@ -122,13 +126,13 @@ def test_agents_halted_mid_run_begin_again_and_estimate_the_load_as_well() -> No
             if agent.phase == Phase.HALTED:
                 halted.add(agent.robot)
                 assert command.force == (0.0, 0.0)
-            if agent.generation == 1:
+            if agent.rejoins == 1:
                 began.setdefault(agent.robot, k)
             plant.command(agent.robot, command.force)
             shares.append(share)
         for share in shares:
             transport.send(share)
-        if all(a.phase == Phase.DONE and a.generation == 1 for a in agents):
+        if all(a.phase == Phase.DONE and a.rejoins == 1 for a in agents):
             break
         plant.advance()
     assert halted == {1, 2, 3, 4}
@@ -139,7 +143,7 @@ def test_agents_halted_mid_run_begin_again_and_estimate_the_load_as_well() -> No
     for a in agents:
         est = a.estimates()
         assert est.tick == truth.tick
-        assert est.generation == 1 and est.phase_since > began[1]
+        assert est.rejoins == 1 and est.phase_since > began[1]
         assert min(est.started.values()) >= began[1]
         assert abs(est.mass - truth.mass) / truth.mass < 1e-3
         assert abs(est.moment - truth.moment) / truth.moment < 1e-3
@@ -151,7 +155,7 @@ def test_agents_halted_mid_run_begin_again_and_estimate_the_load_as_well() -> No
     for a in agents:
         state.ingest(a.estimates(), truth.time_s)
     rows = state.page_scene(truth.time_s)["table"]["robots"]
-    assert len(rows) == 4 and {row["generation"] for row in rows.values()} == {1}
+    assert len(rows) == 4 and {row["rejoins"] for row in rows.values()} == {1}
 
 
 def _stepped(robot: int, ticks: int):
@@ -169,18 +173,18 @@ def test_an_agent_that_missed_the_agreed_tick_begins_the_generation_where_it_is(
     agent.halt()
     agent.step(Measurement(2, 50, 0.5, (0.0, 0.0), (0.0, 0.0)), [])
     assert agent.phase == Phase.HALTED
-    late = Share(1, 52, (0.0, 0.0), 1, phase=Phase.EXCITE, generation=1)
+    late = Share(1, 52, (0.0, 0.0), 1, barrier=Barrier(phase=Phase.EXCITE, rejoins=1))
     command, share = agent.step(Measurement(2, 53, 0.53, (0.0, 0.0), (0.0, 0.0)), [late])
-    assert (agent.phase, agent.generation, agent.origin) == (Phase.EXCITE, 1, 53)
-    assert (share.tick, share.generation, command.tick) == (53, 1, 53)
+    assert (agent.phase, agent.rejoins, agent.origin) == (Phase.EXCITE, 1, 53)
+    assert (share.tick, share.rejoins, command.tick) == (53, 1, 53)
     assert command.force != (0.0, 0.0)  # its own kick, from its own tick 0
 
 
 def test_an_agent_caught_up_past_step_1_halts_that_generation() -> None:
     agent, Measurement = _stepped(2, 50)
-    late = Share(1, 50, (0.0, 0.0), 1, phase=Phase.INERTIA, generation=1)
+    late = Share(1, 50, (0.0, 0.0), 1, barrier=Barrier(phase=Phase.INERTIA, rejoins=1))
     command, share = agent.step(Measurement(2, 51, 0.51, (0.0, 0.0), (0.0, 0.0)), [late])
-    assert (agent.phase, agent.generation) == (Phase.HALTED, 1)
+    assert (agent.phase, agent.rejoins) == (Phase.HALTED, 1)
     assert command.force == (0.0, 0.0) and share.phase == Phase.HALTED
 
 
@@ -211,11 +215,11 @@ def test_the_collector_follows_the_generations_of_a_team_that_begins_again() -> 
 
     say(Status(1, 400, Phase.HALTED, lost_neighbours=(2,)))
     assert collector.halted and collector.lost == {2}
-    say(Estimates(1, 650, Phase.EXCITE, phase_since=651, generation=1))
-    assert not collector.halted and collector.lost == set() and collector.generation == 1
+    say(Estimates(1, 650, Phase.EXCITE, phase_since=651, rejoins=1))
+    assert not collector.halted and collector.lost == set() and collector.rejoins == 1
     say(Status(2, 660, Phase.HALTED))  # of the old generation: late, ignored
     assert not collector.halted
-    say(Estimates(2, 900, Phase.EXCITE, phase_since=901, generation=2))  # its halt unheard
+    say(Estimates(2, 900, Phase.EXCITE, phase_since=901, rejoins=2))  # its halt unheard
     assert collector.rejoins == [{"halted": 400, "began": 651}, {"halted": None, "began": 901}]
 
 

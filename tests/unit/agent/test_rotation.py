@@ -18,6 +18,7 @@ from agent.algorithm.robust.rotation import (
     wrapped,
 )
 from agent.platform.protocol import Share, decode, encode
+from agent.platform.team import ConsensusState
 
 LINE = {1: (2,), 2: (1, 3), 3: (2, 4), 4: (3,)}
 
@@ -116,10 +117,17 @@ def test_own_turn_weighs_each_edge_by_its_information() -> None:
 
 
 def test_the_level_crosses_the_wire_and_is_domain_checked() -> None:
-    share = Share(1, 5, (0.0, 0.0), 1, instant=4, rotation=-3.0)
-    assert decode(Share, encode(share)).rotation == -3.0
-    for bad, message in ((4.0, "share.rotation"), (math.nan, "non-finite"), (-math.inf, "non-")):
+    share = Share(1, 5, (0.0, 0.0), 1, instant=4, consensus=ConsensusState(rotation=-3.0))
+    assert decode(Share, encode(share)).consensus.rotation == -3.0
+    state = share.consensus
+    for bad, message in (
+        (4.0, "share.consensus.rotation"),
+        (math.nan, "non-finite"),
+        (-math.inf, "non-"),
+    ):
         with pytest.raises(ValueError, match=message):
-            decode(Share, encode(dataclasses.replace(share, rotation=bad)))
-    with pytest.raises(ValueError, match="share.rotation_variance"):
-        decode(Share, encode(dataclasses.replace(share, rotation_variance=1e3)))
+            changed = state._replace(rotation=bad)
+            decode(Share, encode(dataclasses.replace(share, consensus=changed)))
+    with pytest.raises(ValueError, match="share.consensus.mean_turn_variance"):
+        changed = state._replace(mean_turn_variance=1e3)
+        decode(Share, encode(dataclasses.replace(share, consensus=changed)))

@@ -109,7 +109,9 @@ def test_a_new_quantity_crosses_the_wire_and_is_checked() -> None:
     assert WIRE.unpack(WIRE.pack(share)) == share
     WIRE.check(share)
     hot = dataclasses.replace(share, consensus=state._replace(mean_temperature=1e4))
-    with pytest.raises(DecodeError, match=r"share\.consensus\.mean_temperature = 10000\.0 is outside"):
+    with pytest.raises(
+        DecodeError, match=r"share\.consensus\.mean_temperature = 10000\.0 is outside"
+    ):
         WIRE.check(hot)
     # Robots that declare different quantities refuse each other's shares, and say why.
     with pytest.raises(DecodeError, match="team quantities of layout"):

@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from agent.platform.protocol import Phase, Share
+from agent.platform.team import ConsensusState
 from agent.platform.transport import InMemoryTransport
 from simulator.generate import generate_scenario
 from simulator.inprocess import RunOutcome, make_agents, run_inprocess
@@ -223,7 +224,13 @@ def test_an_agent_rejects_unusable_shares() -> None:
     agent = Agent(AgentConfig(robot=1, n=2, neighbours=(2,), period_s=0.01))
     bad = [
         Share(sender=2, tick=0, velocity=(math.nan, 0.0), degree=1),
-        Share(sender=2, tick=0, velocity=(0.0, 0.0), degree=1, centroid=(math.inf, 0.0)),
+        Share(
+            sender=2,
+            tick=0,
+            velocity=(0.0, 0.0),
+            degree=1,
+            consensus=ConsensusState(centroid_offset=(math.inf, 0.0)),
+        ),
         Share(sender=2, tick=10_000, velocity=(0.0, 0.0), degree=1),
         Share(sender=3, tick=0, velocity=(0.0, 0.0), degree=1),
     ]
