@@ -19,13 +19,16 @@ import pytest
 
 from agent.algorithm.agent import Agent
 from agent.algorithm.estimation.excitation import kick_force, spin_up_force
-from agent.algorithm.estimation.settling import SettleDetectors
+from agent.algorithm.families import FAMILIES
 from agent.algorithm.inbox import HISTORY_TICKS, Inbox
+from agent.algorithm.paper.tuning import PaperTuning
 from agent.algorithm.phase_machine import PhaseMachine
+from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
 from agent.platform.geometry import Vec2, cross, rotate
-from agent.platform.protocol import Measurement, Phase, Share
+from agent.platform.protocol import Barrier, Measurement, Phase, Share
 from agent.platform.resend import ResendTimeout
+from agent.platform.team import ConsensusState
 
 DT = 0.01
 TUNING = AgentTuning(kick_duration_s=0.05, switch_margin_ticks=2)
@@ -66,8 +69,8 @@ def test_inbox_early_messages_wait_and_bad_ones_are_rejected():
     far = share(2, 5 + HISTORY_TICKS)
     bad = [
         share(2, 4, (math.nan, 0.0)),
-        share(2, 4, centroid=(math.inf, 0.0)),
-        share(2, 4, spread=math.nan),
+        share(2, 4, consensus=ConsensusState(centroid_offset=(math.inf, 0.0))),
+        share(2, 4, consensus=ConsensusState(mean_square_offset=math.nan)),
         share(3, 4),  # not a neighbour
         far,
     ]
@@ -93,44 +96,56 @@ def test_inbox_forgets_old_ticks():
 
 
 @dataclass
-class Flag:
-    settled: bool = False
-
-
-def flags() -> SettleDetectors:
-    return SettleDetectors(*(Flag() for _ in range(6)))
-
-
-@dataclass
 class Own:
-    """Scripted estimates of the machine's own robot (what it reads of them)."""
+    """Scripted estimates of the machine's own robot (what it reads of them:
+    :class:`agent.algorithm.interfaces.OwnEstimates`)."""
 
     instant: int = -1
     omega: float | None = None
     measured: int | None = None
     zdot: dict[int, Vec2] = field(default_factory=dict)
-    settle: SettleDetectors = field(default_factory=flags)
+    ready: set[Phase] = field(default_factory=set)
+    """The phases whose estimates have settled."""
     centroid: Vec2 = (0.0, 0.0)
-    spread: float = 0.0
+    mean_square_offset: float = 0.0
     moment: float | None = None
+    com_velocity: Vec2 | None = None
+    changed: bool = False
+
+    def settled(self, phase: Phase) -> bool:
+        return phase in self.ready
+
+
+PAPER_KEYS = set(PaperTuning.__dataclass_fields__)
+ROBUST_KEYS = set(RobustTuning.__dataclass_fields__)
 
 
 def machine(robot: int = 1, n: int = 3, seed: int = 1, **tuning) -> PhaseMachine:
+    """A phase machine of the family ``tuning`` names (the paper's by default), with the
+    common and the family's keys given."""
     neighbours = tuple(j for j in (robot - 1, robot + 1) if 1 <= j <= n)
-    return PhaseMachine(AgentConfig(robot, n, neighbours, DT, seed, replace(TUNING, **tuning)))
+    paper = {k: tuning.pop(k) for k in list(tuning) if k in PAPER_KEYS}
+    robust = {k: tuning.pop(k) for k in list(tuning) if k in ROBUST_KEYS}
+    full = replace(
+        TUNING,
+        paper=replace(TUNING.paper, **paper),
+        robust=replace(TUNING.robust, **robust),
+        **tuning,
+    )
+    config = AgentConfig(robot, n, neighbours, DT, seed, full)
+    return FAMILIES[full.estimator].phases(config)
 
 
-def state(sender: int, tick: int, m: PhaseMachine) -> Share:
+def state(sender: int, tick: int, m: PhaseMachine) -> Barrier:
     """The barrier's part of ``sender``'s message after its step at ``tick``."""
-    b = m.barrier
-    return share(sender, tick, phase=b.phase, ready=b.ready, switch_at=b.switch_at)
+    return m.barrier.state
 
 
 def run_team(machines, owns, ticks, start=0, events=None):
     """Steps a path of machines: at tick ``k`` each hears its neighbours' states of ``k − 1``.
     ``events[k](machines, owns)`` runs before tick ``k``. Returns each robot's forces."""
     n = len(machines)
-    sent: dict[int, Share] = {}
+    sent: dict[int, Barrier] = {}
     forces = {i: {} for i in machines}
     for k in range(start, start + ticks):
         if events and k in events:
@@ -146,8 +161,7 @@ def run_team(machines, owns, ticks, start=0, events=None):
 def make_ready(*robots):
     def event(machines, owns):
         for i in robots:
-            s = owns[i].settle
-            s.distances.settled = s.centroid.settled = s.spread.settled = True
+            owns[i].ready.add(Phase.EXCITE)
 
     return event
 
@@ -155,7 +169,7 @@ def make_ready(*robots):
 def test_every_robot_switches_at_the_same_agreed_tick():
     n = 3
     machines = {i: machine(i, n) for i in range(1, n + 1)}
-    owns = {i: Own(spread=0.5, omega=0.4, centroid=(0.3 * i, -0.2)) for i in machines}
+    owns = {i: Own(mean_square_offset=0.5, omega=0.4, centroid=(0.3 * i, -0.2)) for i in machines}
     ready = {1: 8, 2: 20, 3: 14}
     events = {tick: make_ready(i) for i, tick in ready.items()}
     forces = run_team(machines, owns, 60, events=events)
@@ -172,18 +186,17 @@ def test_every_robot_switches_at_the_same_agreed_tick():
 
 def test_no_robot_is_ready_during_the_kick():
     m = machine()
-    own = Own(spread=0.5)
-    own.settle.distances.settled = own.settle.centroid.settled = True
-    own.settle.spread.settled = True
+    own = Own(mean_square_offset=0.5)
+    own.ready.add(Phase.EXCITE)
     assert [m.ready(k, own) for k in range(7)] == [False] * 5 + [True, True]
-    own.spread = 0.0  # w = 0: eq. (14) would divide by zero
+    own.mean_square_offset = 0.0  # w = 0: eq. (14) would divide by zero
     assert not m.ready(6, own)
 
 
 def test_a_halt_reaches_the_team_through_its_messages():
     n = 3
     machines = {i: machine(i, n) for i in range(1, n + 1)}
-    owns = {i: Own(spread=0.5, omega=0.4, centroid=(0.3, -0.2)) for i in machines}
+    owns = {i: Own(mean_square_offset=0.5, omega=0.4, centroid=(0.3, -0.2)) for i in machines}
 
     def halt(machines, owns):
         machines[1].halt(31)
@@ -220,7 +233,7 @@ def test_the_kick_is_seeded_of_its_magnitude_and_only_during_kick_duration():
 
 def enter(m: PhaseMachine, phase: Phase, k: int, own: Own) -> None:
     """A neighbour's message says the team is in ``phase``: catch up at tick ``k``."""
-    assert m.step(k, own, [share(2, k - 1, phase=phase)]) is True
+    assert m.step(k, own, [Barrier(phase=phase)]) is True
     assert m.phase is phase and m.since == k
 
 
@@ -228,7 +241,7 @@ def enter(m: PhaseMachine, phase: Phase, k: int, own: Own) -> None:
 def test_inertia_torque_reverses_at_the_limit_and_at_half_of_it(spin):
     limit = 1.0
     m = machine(inertia_max_omega=limit, inertia_force=2.0)
-    own = Own(spread=0.5, omega=0.3 * spin, centroid=(0.6, -0.8))
+    own = Own(mean_square_offset=0.5, omega=0.3 * spin, centroid=(0.6, -0.8))
     enter(m, Phase.INERTIA, 10, own)
     w = 3 * 0.5
     gain = 2.0 / math.sqrt(w)
@@ -249,7 +262,7 @@ def test_inertia_torque_reverses_on_the_predicted_omega():
     """ω last measured at tick 10; the prediction adds the team's torque since, over ``Ĵ``."""
     moment = 2.0
     m = machine(inertia_max_omega=1.0, inertia_force=2.0)
-    own = Own(spread=0.5, omega=0.9, centroid=(1.0, 0.0), measured=10, instant=10)
+    own = Own(mean_square_offset=0.5, omega=0.9, centroid=(1.0, 0.0), measured=10, instant=10)
     enter(m, Phase.INERTIA, 11, own)
     own.moment = moment
     torque = 2.0 * math.sqrt(1.5)  # k w, applied from tick 11 on
@@ -411,7 +424,7 @@ def test_agent_estimates_a_turning_body_from_its_exact_velocities():
         z_i = rot(omega * t) @ (r[i] - centroid)
         assert np.linalg.norm(np.array(est.centroid_offset) - z_i) < 1e-6
         w = sum(float(np.sum((r[j] - centroid) ** 2)) for j in r)
-        assert est.spread == pytest.approx(w, rel=1e-6)
+        assert est.w == pytest.approx(w, rel=1e-6)
 
 
 # --------------------------------------------------------------------------------------------
@@ -421,7 +434,7 @@ def test_agent_estimates_a_turning_body_from_its_exact_velocities():
 
 def test_ready_bits_of_robots_outside_the_team_are_ignored():
     m = machine(robot=2, n=3)
-    forged = share(1, 0, phase=Phase.EXCITE, ready=2**64 - 1)  # every bit, not only 1..3
+    forged = Barrier(phase=Phase.EXCITE, ready=2**64 - 1)  # every bit, not only 1..3
     m.step(1, Own(), [forged])
     assert m.barrier.ready == 0b111  # the three robots: the team can still agree
     assert m.barrier.switch_at == 1 + 3 + TUNING.switch_margin_ticks
@@ -430,22 +443,25 @@ def test_ready_bits_of_robots_outside_the_team_are_ignored():
 def test_a_switch_tick_no_robot_could_have_proposed_is_ignored():
     m = machine(robot=2, n=3)
     too_late = 100 + 3 + TUNING.switch_margin_ticks + 1
-    m.step(100, Own(), [share(1, 99, phase=Phase.EXCITE, switch_at=too_late)])
+    m.step(100, Own(), [Barrier(phase=Phase.EXCITE, switch_at=too_late)])
     assert m.barrier.switch_at == -1
-    m.step(101, Own(), [share(1, 100, phase=Phase.EXCITE, switch_at=too_late)])
+    m.step(101, Own(), [Barrier(phase=Phase.EXCITE, switch_at=too_late)])
     assert m.barrier.switch_at == too_late  # now it could have been proposed
 
 
 @pytest.mark.parametrize(
     "phase, own",
-    [(Phase.PUSH, Own(spread=1.0, moment=None)), (Phase.INERTIA, Own(spread=0.0))],
+    [
+        (Phase.PUSH, Own(mean_square_offset=1.0, moment=None)),
+        (Phase.INERTIA, Own(mean_square_offset=0.0)),
+    ],
     ids=["push without J", "inertia without w"],
 )
 def test_a_phase_this_robot_has_no_estimates_for_halts_the_team(phase, own):
     """Caught up (or told) into a phase whose force law needs what the robot has not
     estimated: it stops the team rather than push wrongly (or crash)."""
     m = machine(robot=2, n=3)
-    assert m.step(40, own, [share(1, 39, phase=phase)])
+    assert m.step(40, own, [Barrier(phase=phase)])
     assert m.phase is Phase.HALTED and m.since == 40
     assert m.force(40, own, (0.3, 0.0)) == (0.0, 0.0)
 
