@@ -113,6 +113,10 @@ def decode_on(keys: Keys, key: str, payload: bytes):
 def _json_value(value):
     if isinstance(value, enum.Enum):
         return value.name.lower()
+    if dataclasses.is_dataclass(value):
+        return to_record(value)
+    if isinstance(value, tuple) and hasattr(value, "_asdict"):  # a typed named tuple
+        return {k: _json_value(v) for k, v in value._asdict().items()}
     if isinstance(value, dict):
         return {str(k): _json_value(v) for k, v in value.items()}
     if isinstance(value, (tuple, list)):
@@ -171,6 +175,20 @@ def _schema_of(tp) -> dict:
         return {"type": "string"}
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         return {"type": "string", "enum": [m.name.lower() for m in tp]}
+    if dataclasses.is_dataclass(tp) or (isinstance(tp, type) and hasattr(tp, "_fields")):
+        hints = typing.get_type_hints(tp, vars(protocol))
+        if dataclasses.is_dataclass(tp):
+            names = [f.name for f in dataclasses.fields(tp)]
+        else:
+            names = list(tp._fields)
+        return {
+            "type": "object",
+            "properties": {name: _schema_of(hints[name]) for name in names},
+            "required": list(names),
+            "additionalProperties": False,
+        }
+    if origin in (typing.Union, types.UnionType) and set(args) == {int, float}:
+        return {"type": "number"}  # a flow: the neighbour's id, then numbers
     if origin in (typing.Union, types.UnionType):
         (option,) = [a for a in args if a is not type(None)]  # X | None, as the protocol has
         schema = _schema_of(option)

@@ -68,6 +68,8 @@ def _coercer(tp: Any) -> Coercer:
     per annotation: every decoded JSON message goes through these, field by field."""
     if dataclasses.is_dataclass(tp):
         return lambda value, key: _from_table(tp, value, key)
+    if isinstance(tp, type) and issubclass(tp, tuple) and hasattr(tp, "_fields"):
+        return _named_tuple_coercer(tp)
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         return _enum_coercer(tp)
     origin = typing.get_origin(tp)
@@ -81,6 +83,21 @@ def _coercer(tp: Any) -> Coercer:
     if scalar is None:
         raise TypeError(f"unsupported annotation {tp!r}")
     return scalar
+
+
+def _named_tuple_coercer(tp: type) -> Coercer:
+    """A typed named tuple from a table of its fields (each present, each checked)."""
+    hints = typing.get_type_hints(tp)
+    items = [(name, _coercer(hints[name])) for name in tp._fields]
+
+    def check(value: Any, key: Key) -> Any:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{_key(key)}: expected a table, got {value!r}")
+        if value.keys() != set(tp._fields):
+            raise ConfigError(f"{_key(key)}: expected the keys {', '.join(tp._fields)}")
+        return tp(*[item(value[name], (key, f".{name}")) for name, item in items])
+
+    return check
 
 
 def _enum_coercer(tp: type[enum.Enum]) -> Coercer:

@@ -129,7 +129,7 @@ class Share:
     instant: int = -1
     barrier: Barrier = Barrier()
     consensus: ConsensusState = ConsensusState()
-    flows: tuple[tuple[float, ...], ...] = ()
+    flows: tuple[tuple[int | float, ...], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,9 +21,9 @@ from __future__ import annotations
 import enum
 import math
 import zlib
-from collections import namedtuple
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 MAX_DISTANCE = 10_000.0
 """m, a position or offset shared between agents."""
@@ -163,12 +163,17 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
 
 
 def consensus_state_type(quantities: Sequence[TeamQuantity] = TEAM_QUANTITIES) -> type:
-    """The immutable record of one robot's states of ``quantities`` (a named tuple: fields by
-    name, in declaration order; every field defaults to its quantity's initial value)."""
+    """The immutable record of one robot's states of ``quantities`` (a typed named tuple:
+    fields by name, in declaration order, each a ``float`` or a ``tuple[float, float]``; every
+    field defaults to its quantity's initial value)."""
     names = [q.name for q in quantities]
     if len(set(names)) != len(names):
         raise ValueError(f"team quantities named twice: {names}")
-    return namedtuple("ConsensusState", names, defaults=[q.initial for q in quantities])
+    fields = [(q.name, float if q.shape == 1 else tuple[float, float]) for q in quantities]
+    record = NamedTuple("ConsensusState", fields)
+    record.__new__.__defaults__ = tuple(q.initial for q in quantities)
+    record.__doc__ = "One robot's states of the team's quantities: " + ", ".join(names) + "."
+    return record
 
 
 ConsensusState = consensus_state_type(TEAM_QUANTITIES)

@@ -27,6 +27,7 @@ from agent.node import AgentNode, AgentNodeConfig, zenoh_agent_node
 from agent.platform.process import RejectLog
 from agent.platform.protocol import (
     DOMAINS,
+    Barrier,
     Command,
     Control,
     DecodeError,
@@ -35,6 +36,7 @@ from agent.platform.protocol import (
     Share,
     encode,
 )
+from agent.platform.team import ConsensusState
 from agent.platform.zenoh_robot_io import ZenohAgentsPort
 from simulator.inprocess import run_inprocess
 from simulator.launcher import Collector
@@ -279,11 +281,13 @@ adversarial = st.one_of(
         tick=ticks,
         velocity=pairs,
         degree=st.integers(0, 255),
-        centroid=st.none() | pairs,
-        spread=finite,
-        phase=st.sampled_from(Phase),
-        ready=st.integers(0, 2**64 - 1),
-        switch_at=ticks,
+        barrier=st.builds(
+            Barrier,
+            phase=st.sampled_from(Phase),
+            ready=st.integers(0, 2**64 - 1),
+            switch_at=ticks,
+        ),
+        consensus=st.builds(ConsensusState, centroid_offset=pairs, mean_square_offset=finite),
         flows=st.lists(st.tuples(ids, *[finite] * 9), max_size=4).map(tuple),
         instant=ticks,
     ),

@@ -18,6 +18,8 @@ from typing import Any
 
 import pytest
 
+from agent.algorithm.paper.tuning import PaperTuning
+from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentTuning
 from agent.node import AgentNodeConfig, load_agent_config
 from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds
@@ -215,14 +217,14 @@ COMPANIONS: dict[tuple[str, float], dict[str, Any]] = {
     },
     ("agent.kick_force", 1000.0): _MAX_FORCE,
     ("agent.inertia_force", 1000.0): _MAX_FORCE,
-    ("agent.push_min_force", 1000.0): _MAX_FORCE,
-    ("agent.push_force", 1000.0): _MAX_FORCE,
+    ("agent.paper.push_min_force", 1000.0): _MAX_FORCE,
+    ("agent.robust.push_force", 1000.0): _MAX_FORCE,
 }
 
 
 def _companions(key: str, value: float) -> dict[str, Any]:
     if key == "agent.max_force" and value < 3.0:  # the other forces are at most max_force
-        forces = ("kick_force", "inertia_force", "push_min_force", "push_force")
+        forces = ("kick_force", "inertia_force", "paper.push_min_force", "robust.push_force")
         return {f"agent.{k}": value for k in forces}
     return COMPANIONS.get((key, value), {})
 
@@ -234,6 +236,8 @@ SCENARIO_CASES = [
     *_cases("floor", Floor),
     *_cases("run", RunSettings),
     *_cases("agent", AgentTuning),
+    *_cases("agent.paper", PaperTuning),
+    *_cases("agent.robust", RobustTuning),
 ]
 
 
@@ -252,6 +256,8 @@ ROBOT_CASES = [
     *_cases("", AgentNodeConfig),
     *_cases("zenoh", ZenohSettings),
     *_cases("tuning", AgentTuning),
+    *_cases("tuning.paper", PaperTuning),
+    *_cases("tuning.robust", RobustTuning),
 ]
 
 
