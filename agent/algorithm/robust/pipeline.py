@@ -27,9 +27,9 @@ from agent.algorithm.robust.load_change import ProbeFit
 from agent.algorithm.robust.mass_fit import MassFit
 from agent.algorithm.robust.rotation import RotationConsensus, own_turn, turn_weight, wrapped
 from agent.algorithm.robust.team_mass import inputs, mass_input, team_mass
-from agent.algorithm.robust.uncertainty import published
+from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, packed
 from agent.algorithm.tuning import AgentConfig
-from agent.platform.geometry import Vec2
+from agent.platform.geometry import Vec2, turned_covariance
 
 if TYPE_CHECKING:
     from agent.algorithm.inbox import Inbox
@@ -279,6 +279,47 @@ class RobustPipeline(EstimationPipeline):
         return consensus.state
 
     def _reported(self, relative: dict[int, Vec2], contact_to_com: Vec2 | None) -> dict:
-        """The published standard deviations and covariances
-        (:func:`~agent.algorithm.robust.uncertainty.published`)."""
-        return published(self, relative, contact_to_com)
+        """The published standard deviations and covariances, for
+        :class:`~agent.platform.protocol.Estimates` (:mod:`agent.algorithm.robust.uncertainty`):
+        ``relative`` are the ``z_ij`` reported, ``contact_to_com`` the offset reported (``None``:
+        not yet)."""
+        edges = {}
+        for j in relative:
+            cov = self.edges[j].covariance
+            if cov is not None:
+                turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
+                edges[j] = packed(turned_covariance(cov, turned))
+        gain_std = self.drive.std or 0.0
+        team_gain_std = gain_std / math.sqrt(self.n)
+        moment = self.moment
+        moment_std = self.inertia.std if self.inertia is not None else None
+        if moment_std is not None:
+            moment_std = math.hypot(moment_std * self._torque_gain, moment * team_gain_std)
+        _, mass_std = self._robust_mass()
+        scale = PUBLISHED_VARIANCE["relative"]
+        out: dict = {
+            "drive_gain": None if self.drive.std is None else self.drive.estimate,
+            "drive_gain_std": self.drive.std,
+            "relative_positions_cov": {
+                j: tuple(scale * e for e in cov) for j, cov in edges.items()
+            },
+            "moment_std": None
+            if moment_std is None
+            else moment_std * math.sqrt(PUBLISHED_VARIANCE["moment"]),
+            "mass_std": mass_std,
+        }
+        com_cov = self.com.covariance if self.com is not None else None
+        if contact_to_com is not None and edges and com_cov is not None:
+            alpha = self.angle - self.push_angle
+            (a, b), (_, d) = turned_covariance(com_cov, alpha)
+            c = self.com.com_offset(alpha)
+            rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
+            count = len(edges)
+            # σ_g² w / 2n²
+            weighted = gain_std * gain_std * self.mean_square_offset / (2.0 * self.n)
+            xx = sum(e[0] for e in edges.values()) / count + a + rel2 * c[0] * c[0] + weighted
+            xy = sum(e[1] for e in edges.values()) / count + b + rel2 * c[0] * c[1]
+            yy = sum(e[2] for e in edges.values()) / count + d + rel2 * c[1] * c[1] + weighted
+            scale = PUBLISHED_VARIANCE["contact_to_com"]
+            out["contact_to_com_cov"] = (scale * xx, scale * xy, scale * yy)
+        return out

@@ -13,13 +13,14 @@ import pytest
 from agent.algorithm.estimation.estimator import Estimator
 from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
 from agent.algorithm.paper.relative_position import RelativePosition
-from agent.algorithm.phase_machine import PhaseMachine
 from agent.algorithm.robust.arc_fit import ArcRelativePosition
 from agent.algorithm.robust.com_fit import ComFit
 from agent.algorithm.robust.drive_gain import DriveGain
 from agent.algorithm.robust.inertia_fit import InertiaFit
 from agent.algorithm.robust.least_squares import LeastSquares
 from agent.algorithm.robust.mass_fit import MassFit
+from agent.algorithm.robust.phases import RobustPhases
+from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
 from agent.platform.config import ConfigError, from_table, to_toml
 from agent.platform.geometry import rotate
@@ -276,8 +277,8 @@ def test_the_estimator_is_chosen_by_name() -> None:
     assert from_table(AgentTuning, {"estimator": "robust"}, "agent") == tuning
     with pytest.raises(ConfigError, match="agent.estimator: expected one of paper, robust"):
         from_table(AgentTuning, {"estimator": "kalman"}, "agent")
-    with pytest.raises(ConfigError, match="push_force"):
-        AgentTuning(push_force=20.0).validate("agent")
+    with pytest.raises(ConfigError, match="robust.push_force"):
+        AgentTuning(robust=RobustTuning(push_force=20.0)).validate("agent")
 
 
 class _Own:
@@ -289,7 +290,7 @@ class _Own:
         self.measured = 0
         self.zdot = {}
         self.centroid = (1.0, 0.5)
-        self.spread = 2.0
+        self.mean_square_offset = 2.0
         self.moment = 12.0
 
 
@@ -298,8 +299,9 @@ def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -
     up and braking for a flip each, after braking for ``inertia_brake_s`` if it is set."""
     schedules = []
     for omega, brake in ((0.49, 0.0), (0.51, 0.0), (0.5, 0.25)):
-        tuning = AgentTuning(estimator=Estimators.ROBUST, inertia_flip_s=0.5, inertia_brake_s=brake)
-        machine = PhaseMachine(AgentConfig(1, 4, (2,), DT, tuning=tuning))
+        robust = RobustTuning(inertia_flip_s=0.5, inertia_brake_s=brake)
+        tuning = AgentTuning(estimator=Estimators.ROBUST, robust=robust)
+        machine = RobustPhases(AgentConfig(1, 4, (2,), DT, tuning=tuning))
         machine.entered[Phase.INERTIA] = 100
         machine.barrier.phase = Phase.INERTIA
         machine.inertia_torque, machine.inertia_gain, machine.spin_sign = 2.8, 1.4, 1.0

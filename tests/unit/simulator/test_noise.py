@@ -43,8 +43,8 @@ def _scenario(seed: int, estimator: Estimators, noise: bool = True, max_time_s: 
             estimator=estimator,
             spin_speed=1.0,
             spin_gain=10.0,
-            push_force=2.0,
             push_flip_s=2.0,
+            robust=dataclasses.replace(paper.agent.robust, push_force=2.0),
         ),
     )
 

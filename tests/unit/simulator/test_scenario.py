@@ -360,7 +360,7 @@ def test_valid_variations_are_accepted() -> None:
     data["contacts"]["points"][0] = [-1.04, -0.5]  # slightly off the boundary: tolerated
     data["graph"]["edges"] = [[2, 1], [3, 2], [4, 3], [1, 4]]
     data["run"] = {"seed": 0, "physics_hz": 500, "max_time_s": 10}
-    data["agent"] = {"push_min_force": 2.0}
+    data["agent"] = {"paper": {"push_min_force": 2.0}}
     data["description"] = "variations"
     s = parse_scenario(data)
     assert s.body.moment == 1.5 and s.body.moment_given
@@ -368,7 +368,7 @@ def test_valid_variations_are_accepted() -> None:
     assert s.body.position == (3.0, 4.0) and s.body.angle == 0.5
     assert s.neighbours(1) == (2, 4)
     assert s.substeps == 5
-    assert s.agent.push_min_force == 2.0
+    assert s.agent.paper.push_min_force == 2.0
     assert s.description == "variations"
 
 
