@@ -209,9 +209,9 @@ def test_every_message_round_trips(message) -> None:
 
 
 def test_a_shares_team_state_survives() -> None:
-    assert decode(Share, encode(SHARE_PLAIN)).team == ConsensusState()
-    assert decode(Share, encode(SHARE_CENTROID)).team.centroid_offset == (1.5, -2.25)
-    assert decode(Share, encode(SHARE_FLOWS)).team.mean_gain_offset == (0.04, -0.01)
+    assert decode(Share, encode(SHARE_PLAIN)).consensus == ConsensusState()
+    assert decode(Share, encode(SHARE_CENTROID)).consensus.centroid_offset == (1.5, -2.25)
+    assert decode(Share, encode(SHARE_FLOWS)).consensus.mean_gain_offset == (0.04, -0.01)
 
 
 def test_estimates_keep_their_dict_keys_as_ints_and_pairs_as_tuples() -> None:
