@@ -230,6 +230,10 @@ class Collector:
         e.g. the router was down) and the tick it began again."""
         self.halted_tick: int | None = None
         self.record_every = record_every
+        """The history gets a complete instant at least this many ticks after the previous one
+        it got (whichever ticks the agents report: every ``report_every``-th, the instant
+        before it), and the final instant."""
+        self._record_from = 0
         self.rejects = RejectLog(LOG, "launcher")
         self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
         self.truths: dict[int, Truth] = {}
@@ -393,8 +397,9 @@ class Collector:
         del self.estimates[instant]
         del self.truths[instant]
         done = self.done_instant
-        if instant % self.record_every == 0 or instant == done:
+        if instant >= self._record_from or instant == done:
             self.history.append(sample)
+            self._record_from = max(self._record_from, instant + self.record_every)
         if done is None or instant < done:
             if self.latest is None or instant > self.latest.truth.tick:
                 self.latest = sample

@@ -281,18 +281,14 @@ def step_times(outcome: RunOutcome) -> list[dict[str, Any]]:
 
 def floor_check(outcome: RunOutcome) -> dict[str, Any]:
     """The load's excursion against the scenario's floor: its COM's largest distance from
-    where it started (m), largest speed (m/s) and largest ``|ω|`` (rad/s), over every tick in
-    one process (:attr:`RunOutcome.excursion`), else over the recorded samples; the limits,
-    and whether all three were kept (``within``)."""
+    where it started (m), largest speed (m/s) and largest ``|ω|`` (rad/s) over every tick
+    from the start to the final instant, as the plant tracked them (the final truth's
+    ``largest_travel``, ``largest_speed`` and ``largest_omega``: the same figures in one
+    process and over Zenoh, whatever the launcher heard); the limits, and whether all three
+    were kept (``within``)."""
     floor = outcome.scenario.floor
-    if outcome.excursion is not None:
-        travel, speed, omega = (outcome.excursion[k] for k in ("travel_m", "speed", "omega"))
-    else:
-        samples = [s.truth for s in outcome.history] or [outcome.final.truth]
-        start = samples[0].com_position
-        travel = max(math.dist(t.com_position, start) for t in samples)
-        speed = max(math.hypot(*t.com_velocity) for t in samples)
-        omega = max(abs(t.omega) for t in samples)
+    truth = outcome.final.truth
+    travel, speed, omega = truth.largest_travel, truth.largest_speed, truth.largest_omega
     return {
         "travel_m": travel,
         "speed": speed,
@@ -533,7 +529,7 @@ def format_table(outcome: RunOutcome) -> str:
     regimes = ", ".join(f"{name} {t:.2f} s" for name, t in team_phases(outcome).items())
     lines.append("(start: the first robot began the step; end: the last robot's estimate settled)")
     lines.append(f"team force regimes from: {regimes or '-'}")
-    lines.append(_floor_line(floor_check(outcome)))
+    lines += _floor_lines(floor_check(outcome), outcome.final.time_s)
     changes = load_changes(outcome)
     if changes["changes"] or changes["restarts_s"]:
         lines.append(_changes_line(changes))
@@ -547,14 +543,16 @@ def format_table(outcome: RunOutcome) -> str:
     return "\n".join(lines)
 
 
-def _floor_line(floor: dict[str, Any]) -> str:
+def _floor_lines(floor: dict[str, Any], until_s: float) -> list[str]:
+    """The floor check, and what it was computed from (every tick up to ``until_s``)."""
     limits = floor["limits"]
     verdict = "within the floor" if floor["within"] else "LEFT THE FLOOR"
-    return (
+    return [
         f"load's largest travel {floor['travel_m']:.2f} m (limit {limits['travel_m']:g}),"
         f" speed {floor['speed']:.2f} m/s ({limits['speed']:g}),"
-        f" |ω| {floor['omega']:.2f} rad/s ({limits['omega']:g}): {verdict}"
-    )
+        f" |ω| {floor['omega']:.2f} rad/s ({limits['omega']:g}): {verdict}",
+        f"(the plant's figures over every tick from t = 0 to {until_s:.2f} s)",
+    ]
 
 
 def _changes_line(changes: dict[str, Any]) -> str:
