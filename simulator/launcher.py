@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING, TextIO
 from agent.node import AgentNodeConfig
 from agent.platform.children import Child, describe_exit, free_port, stop_all, wait_all
 from agent.platform.config import to_toml
+from agent.platform.evaluation import final_instant
 from agent.platform.faults import FaultSettings
 from agent.platform.process import RejectLog
 from agent.platform.protocol import (
@@ -239,7 +240,8 @@ class Collector:
         self.truths: dict[int, Truth] = {}
         self.history: History[Sample] = History()
         self.phase_ticks: dict[str, int] = {}
-        self.done_since: dict[int, int] = {}
+        self.newest: dict[int, Estimates] = {}
+        """Each robot's newest estimates heard (of the team's newest generation)."""
         self.statuses: dict[int, Status] = {}
         """Each robot's latest status."""
         self.halted = False
@@ -347,7 +349,7 @@ class Collector:
                 self.rejoins.append({"halted": self.halted_tick, "began": began})
                 self.halted, self.halted_tick = False, None
                 self.lost.clear()
-                self.done_since.clear()
+                self.newest.clear()
                 self.phase_ticks = {p: t for p, t in self.phase_ticks.items() if p == "halted"}
             self.generation = message.generation
         return True
@@ -357,10 +359,7 @@ class Collector:
             return
         if est.phase == Phase.HALTED:
             self._halt(est.tick)
-        if est.phase == Phase.DONE:
-            self.done_since[est.robot] = est.phase_since
-        else:  # (a changed load: the team estimates it again)
-            self.done_since.pop(est.robot, None)
+        self.newest[est.robot] = est  # (done, or not any more: a changed load is estimated again)
         self.estimates[est.tick][est.robot] = est
         self._complete(est.tick)
 
@@ -383,10 +382,9 @@ class Collector:
 
     @property
     def done_instant(self) -> int | None:
-        """The first instant at which every robot was done (the final instant)."""
-        if len(self.done_since) < self.n:
-            return None
-        return max(max(self.done_since.values()), self.end_tick)
+        """The first instant at which every robot was done (the final instant:
+        :func:`~agent.platform.evaluation.final_instant` of each robot's newest estimates)."""
+        return final_instant([self.newest.get(i) for i in range(1, self.n + 1)], self.end_tick)
 
     def _complete(self, instant: int) -> None:
         robots = self.estimates.get(instant)

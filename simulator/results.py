@@ -32,14 +32,15 @@ and whether the truth fell inside each: ``|error| ≤ 1.96 σ`` for m and J, the
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from agent.algorithm.estimation.estimator import largest_std
-from agent.platform.geometry import Vec2
+from agent.platform import evaluation
+from agent.platform.evaluation import ERROR_KEYS, true_relative
 
 if TYPE_CHECKING:
-    from agent.platform.protocol import Estimates, Truth
+    from agent.platform.protocol import Estimates
     from simulator.inprocess import RunOutcome
     from simulator.scenario import Scenario
 
@@ -54,17 +55,6 @@ STEP_NAMES = {
     6: "COM velocity",
     7: "mass m",
 }
-ERROR_KEYS = (
-    "mass_rel",
-    "moment_rel",
-    "contact_to_com_m",
-    "relative_positions_m",
-    "centroid_offset_m",
-    "com_offset_m",
-    "com_observer_m",
-    "omega_rad_s",
-)
-"""The keys of :func:`errors`; the first five are those the project's accuracy aims bound."""
 
 
 # ------------------------------------------------------------------------------ small helpers
@@ -84,32 +74,7 @@ def _vec(value: Sequence[float] | None) -> list[float] | None:
     return None if x is None or y is None else [x, y]
 
 
-def _diff(a: Vec2, b: Vec2) -> Vec2:
-    return (a[0] - b[0], a[1] - b[1])
-
-
-def _worst(values: Iterable[float | None]) -> float | None:
-    """The largest of ``values``; None if any is None (the worst is then unknown) or none."""
-    items = list(values)
-    if not items or any(v is None for v in items):
-        return None
-    return _number(max(items))  # type: ignore[type-var]
-
-
-def _rel(estimate: float | None, truth: float) -> float | None:
-    return None if estimate is None else abs(estimate - truth) / abs(truth)
-
-
-def _dist(estimate: Sequence[float] | None, truth: Sequence[float]) -> float | None:
-    return None if estimate is None else math.dist(estimate, truth)
-
-
 # ------------------------------------------------------------------------------ truth
-def true_relative(truth: Truth, i: int, j: int) -> Vec2:
-    """``z_ij = p_Ci − p_Cj`` from the plant's truth (robots are 1-based)."""
-    return _diff(truth.contacts[i - 1], truth.contacts[j - 1])
-
-
 def _neighbours(outcome: RunOutcome) -> dict[int, tuple[int, ...]]:
     scenario = outcome.scenario
     return {i: scenario.neighbours(i) for i in range(1, scenario.n + 1)}
@@ -172,39 +137,25 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
 
 # ------------------------------------------------------------------------------ errors
 def robot_errors(outcome: RunOutcome, robot: int) -> dict[str, float | None]:
-    """Robot ``robot``'s errors against truth at the final instant (None: no estimate).
-
-    ``relative_positions_m`` is its worst ``‖ẑ_ij − z_ij‖`` over its graph neighbours ``j``.
-    """
-    truth = outcome.final.truth
-    est = outcome.final.estimates.get(robot)
-    if est is None:
-        return dict.fromkeys(ERROR_KEYS)
-    i = robot
-    return {
-        "mass_rel": _rel(est.mass, truth.mass),
-        "moment_rel": _rel(est.moment, truth.moment),
-        "contact_to_com_m": _dist(est.contact_to_com, truth.contact_to_com[i - 1]),
-        "relative_positions_m": _worst(
-            _dist(est.relative_positions.get(j), true_relative(truth, i, j))
-            for j in outcome.scenario.neighbours(i)
-        ),
-        "centroid_offset_m": _dist(est.centroid_offset, truth.centroid_offsets[i - 1]),
-        "com_offset_m": _dist(est.com_offset, truth.com_offset),
-        "com_observer_m": _dist(est.com_observer, truth.com_offset),
-        "omega_rad_s": None if est.omega is None else abs(est.omega - truth.omega),
-    }
+    """Robot ``robot``'s errors against truth at the final instant
+    (:func:`agent.platform.evaluation.robot_errors`: ``relative_positions_m`` over its graph
+    neighbours; None: no estimate)."""
+    final = outcome.final
+    neighbours = outcome.scenario.neighbours(robot)
+    return evaluation.robot_errors(final.estimates.get(robot), final.truth, neighbours)
 
 
 def errors(outcome: RunOutcome) -> dict[str, float | None]:
-    """The worst error over robots of each estimate at the final instant.
+    """The worst error over robots of each estimate at the final instant
+    (:func:`agent.platform.evaluation.team_errors`).
 
-    Keys are :data:`ERROR_KEYS`: ``mass_rel`` and ``moment_rel`` are relative
-    (``|m̂ − m| / m``), the ``_m`` keys are Euclidean distances in metres and ``omega_rad_s``
-    is ``|ω̂ − ω|``. A value is None when some robot has no such estimate.
+    Keys are :data:`~agent.platform.evaluation.ERROR_KEYS`: ``mass_rel`` and ``moment_rel``
+    are relative (``|m̂ − m| / m``), the ``_m`` keys are Euclidean distances in metres and
+    ``omega_rad_s`` is ``|ω̂ − ω|``. A value is None when some robot has no such estimate.
     """
-    per_robot = [robot_errors(outcome, i) for i in range(1, outcome.scenario.n + 1)]
-    return {key: _worst(e[key] for e in per_robot) for key in ERROR_KEYS}
+    final = outcome.final
+    found = evaluation.team_errors(final.estimates, final.truth, _neighbours(outcome))
+    return {key: _number(value) for key, value in found.items()}
 
 
 # ------------------------------------------------------------------------------ intervals
