@@ -25,6 +25,7 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 
 from agent.platform.config import MAX_ROBOTS
+from agent.platform.evaluation import final_instant, robot_errors
 from agent.platform.protocol import (
     BridgeStatus,
     Clock,
@@ -60,10 +61,6 @@ RESOLUTION_S = 0.05
 on how often the robots report, nor on the speed of a replay, and is the same live and
 replayed."""
 _PHASES = [p.label for p in Phase]
-
-
-def _finite(*values) -> bool:
-    return all(v is not None and math.isfinite(v) for v in values)
 
 
 def _norm(v) -> float | None:
@@ -285,13 +282,15 @@ class TeamState:
     # ------------------------------------------------------------------ the final instant
     @property
     def done_instant(self) -> int | None:
-        """The first instant at which every robot was done: ``max_i phase_since_i``, not before
-        the scenario's end (as the launcher finds it), or None before every robot is done."""
+        """The first instant at which every robot was done, not before the scenario's end
+        (:func:`~agent.platform.evaluation.final_instant` of each robot's latest estimates, as
+        the launcher finds it), or None before every robot is done."""
         n = self.n
-        if not n or not self.done:
+        if not n:
             return None
+        latest = [view.estimates if (view := self.robots.get(i)) else None for i in range(1, n + 1)]
         end = self.geometry.end_tick if self.geometry is not None else 0
-        return max(end, *(self.robots[i].estimates.phase_since for i in range(1, n + 1)))
+        return final_instant(latest, end)
 
     def _conclude(self, tick: int) -> None:
         """Look for the final table after a done estimate or a truth of ``tick`` arrived.
@@ -335,7 +334,9 @@ class TeamState:
     # ------------------------------------------------------------------ the table
     def table(self, truth: Truth | None, robots: dict[int, Estimates], final: bool) -> dict:
         """Each robot's estimates against ``truth`` (when known): m̂, Ĵ, ``p_C − p_Ci``,
-        ``‖ẑ_C‖`` and their errors (m̂ and Ĵ in %, offsets in mm)."""
+        ``ẑ_C`` and their errors (:func:`~agent.platform.evaluation.robot_errors`: relative,
+        metres and rad/s, ``relative_positions_m`` over the neighbours its estimates name),
+        and the worst of each over the robots that have one."""
         rows = {}
         worst: dict[str, float] = {}
         for i, est in sorted(robots.items()):
@@ -353,7 +354,8 @@ class TeamState:
                 "relative_positions": _by_neighbour(est),
             }
             if truth is not None and i <= len(truth.contacts):
-                errors = _errors(est, truth, i)
+                known = [j for j in est.relative_positions if 1 <= j <= len(truth.contacts)]
+                errors = robot_errors(est, truth, known)
                 row["errors"] = errors
                 for name, value in errors.items():
                     if value is not None:
@@ -652,7 +654,8 @@ class TeamState:
     def page_scene(self, now: float) -> dict:
         """The scene as the page draws it (its frames carry it ~20 times a second): what
         :meth:`scene` holds, less what the page does not show (per robot only its phase, tick,
-        segments and liveliness; the table's rows without ω, ``ẑ_C`` and ``ẑ_ij``)."""
+        segments and liveliness; the table's rows without ω, ``ẑ_C`` and ``ẑ_ij``, and of
+        their errors those of m̂, Ĵ, ``p_C − p_Ci`` and ``ẑ_ij`` only)."""
         scene = self.scene(now)
         scene["robots"] = {
             i: {key: view[key] for key in _PAGE_ROBOT} for i, view in scene["robots"].items()
@@ -662,10 +665,7 @@ class TeamState:
         scene["table"] = {
             "final": table["final"],
             "t": table["t"],
-            "robots": {
-                i: {key: row[key] for key in _PAGE_ROW if key in row}
-                for i, row in table["robots"].items()
-            },
+            "robots": {i: _page_row(row) for i, row in table["robots"].items()},
             "truth": None if truth is None else {"mass": truth["mass"], "moment": truth["moment"]},
         }
         for key in _NOT_ON_PAGE:
@@ -689,7 +689,16 @@ _PAGE_ROW = (
     "contact_to_com",
     "errors",
 )
+_PAGE_ERRORS = ("mass_rel", "moment_rel", "contact_to_com_m", "relative_positions_m")
 _NOT_ON_PAGE = ("truth", "plant", "received", "rejected")
+
+
+def _page_row(row: dict) -> dict:
+    """A row of the table as the page draws it (:data:`_PAGE_ROW`, :data:`_PAGE_ERRORS`)."""
+    drawn = {key: row[key] for key in _PAGE_ROW if key in row}
+    if "errors" in drawn:
+        drawn["errors"] = {key: drawn["errors"][key] for key in _PAGE_ERRORS}
+    return drawn
 
 
 def _truth_row(truth: Truth | None) -> dict | None:
@@ -710,29 +719,6 @@ def _truth_row(truth: Truth | None) -> dict | None:
         "com_offset_norm": round(_norm(truth.com_offset), 9),
         "contact_to_com": [list(c) for c in truth.contact_to_com],
         "edge_norms": pairs,
-    }
-
-
-def _errors(est: Estimates, truth: Truth, i: int) -> dict:
-    """Robot ``i``'s errors against ``truth``: m̂ and Ĵ in %, offsets in mm."""
-    mass = moment = contact = relative = None
-    if _finite(est.mass):
-        mass = 100.0 * abs(est.mass - truth.mass) / truth.mass
-    if _finite(est.moment):
-        moment = 100.0 * abs(est.moment - truth.moment) / truth.moment
-    if est.contact_to_com is not None:
-        contact = 1000.0 * math.dist(est.contact_to_com, truth.contact_to_com[i - 1])
-    pi = truth.contacts[i - 1]
-    for j, z in est.relative_positions.items():
-        if 1 <= j <= len(truth.contacts):
-            pj = truth.contacts[j - 1]
-            err = 1000.0 * math.dist(z, (pi[0] - pj[0], pi[1] - pj[1]))
-            relative = err if relative is None else max(relative, err)
-    return {
-        "mass_pct": mass,
-        "moment_pct": moment,
-        "contact_to_com_mm": contact,
-        "z_ij_mm": relative,
     }
 
 

@@ -18,7 +18,6 @@ estimates.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -61,10 +60,6 @@ class RunOutcome:
     phase_ticks: dict[str, int] = field(default_factory=dict)
     transport: dict = field(default_factory=dict)
     """What the transport reported (the Zenoh run: the plant's counters and latencies)."""
-    excursion: dict[str, float] | None = None
-    """The load's largest travel from its start (m), speed (m/s) and ``|ω|`` (rad/s) over every
-    tick (in one process; ``None``: the recorded samples say, see
-    :func:`simulator.results.floor_check`)."""
     reason: str = ""
     """Why the run did not converge (``""`` when it did), short and machine-readable: out of
     simulated time, a robot lost, a process lost, interrupted (see the README's exit status)."""
@@ -129,14 +124,8 @@ def run_inprocess(
     give_up = max_ticks + ALIGN_TICKS
     k = 0
     interrupted = False
-    start, _, _ = plant.excursion()
-    excursion = {"travel_m": 0.0, "speed": 0.0, "omega": 0.0}
     try:
         while k <= give_up:
-            position, velocity, omega = plant.excursion()
-            excursion["travel_m"] = max(excursion["travel_m"], math.dist(position, start))
-            excursion["speed"] = max(excursion["speed"], math.hypot(*velocity))
-            excursion["omega"] = max(excursion["omega"], abs(omega))
             measurements = plant.measure()
             if quantiser is not None:
                 measurements = [quantiser.measurement(m) for m in measurements]
@@ -189,7 +178,6 @@ def run_inprocess(
         final=final,
         history=_with_final(history, final),
         phase_ticks=phase_ticks,
-        excursion=excursion,
     )
 
 

@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING, TextIO
 from agent.node import AgentNodeConfig
 from agent.platform.children import Child, describe_exit, free_port, stop_all, wait_all
 from agent.platform.config import to_toml
+from agent.platform.evaluation import final_instant
 from agent.platform.faults import FaultSettings
 from agent.platform.process import RejectLog
 from agent.platform.protocol import (
@@ -230,12 +231,17 @@ class Collector:
         e.g. the router was down) and the tick it began again."""
         self.halted_tick: int | None = None
         self.record_every = record_every
+        """The history gets a complete instant at least this many ticks after the previous one
+        it got (whichever ticks the agents report: every ``report_every``-th, the instant
+        before it), and the final instant."""
+        self._record_from = 0
         self.rejects = RejectLog(LOG, "launcher")
         self.estimates: dict[int, dict[int, Estimates]] = defaultdict(dict)  # instant → robot
         self.truths: dict[int, Truth] = {}
         self.history: History[Sample] = History()
         self.phase_ticks: dict[str, int] = {}
-        self.done_since: dict[int, int] = {}
+        self.newest: dict[int, Estimates] = {}
+        """Each robot's newest estimates heard (of the team's newest generation)."""
         self.statuses: dict[int, Status] = {}
         """Each robot's latest status."""
         self.halted = False
@@ -343,7 +349,7 @@ class Collector:
                 self.rejoins.append({"halted": self.halted_tick, "began": began})
                 self.halted, self.halted_tick = False, None
                 self.lost.clear()
-                self.done_since.clear()
+                self.newest.clear()
                 self.phase_ticks = {p: t for p, t in self.phase_ticks.items() if p == "halted"}
             self.rejoined = message.rejoins
         return True
@@ -353,10 +359,7 @@ class Collector:
             return
         if est.phase == Phase.HALTED:
             self._halt(est.tick)
-        if est.phase == Phase.DONE:
-            self.done_since[est.robot] = est.phase_since
-        else:  # (a changed load: the team estimates it again)
-            self.done_since.pop(est.robot, None)
+        self.newest[est.robot] = est  # (done, or not any more: a changed load is estimated again)
         self.estimates[est.tick][est.robot] = est
         self._complete(est.tick)
 
@@ -379,10 +382,9 @@ class Collector:
 
     @property
     def done_instant(self) -> int | None:
-        """The first instant at which every robot was done (the final instant)."""
-        if len(self.done_since) < self.n:
-            return None
-        return max(max(self.done_since.values()), self.end_tick)
+        """The first instant at which every robot was done (the final instant:
+        :func:`~agent.platform.evaluation.final_instant` of each robot's newest estimates)."""
+        return final_instant([self.newest.get(i) for i in range(1, self.n + 1)], self.end_tick)
 
     def _complete(self, instant: int) -> None:
         robots = self.estimates.get(instant)
@@ -393,8 +395,9 @@ class Collector:
         del self.estimates[instant]
         del self.truths[instant]
         done = self.done_instant
-        if instant % self.record_every == 0 or instant == done:
+        if instant >= self._record_from or instant == done:
             self.history.append(sample)
+            self._record_from = max(self._record_from, instant + self.record_every)
         if done is None or instant < done:
             if self.latest is None or instant > self.latest.truth.tick:
                 self.latest = sample

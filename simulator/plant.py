@@ -5,7 +5,8 @@ The agents never see this module's state directly. Each sensor tick they get one
 the robot's contact point and the force it applied, both with optional Gaussian noise), and they
 answer with :meth:`Plant.command` (the force to apply until the next tick).
 :meth:`Plant.advance` then integrates one sensor period. :meth:`Plant.truth` exposes the ground
-truth for evaluation only.
+truth for evaluation only, with the load's excursion over every tick so far (its largest travel
+from the start, speed and ``|ω|``: what the scenario's floor is checked against).
 
 Conventions (those of the paper, Sec. II):
 
@@ -118,6 +119,11 @@ class Plant:
         """Each drive's force now (with a lag it carries over from one tick to the next)."""
         self._events = list(scenario.events)
         """The load changes still to come, first first."""
+        self._start: Vec2 = self._com_position()
+        """``p_C(t_0)``, where the load's travel is measured from."""
+        self.largest_travel = self.largest_speed = self.largest_omega = 0.0
+        """The load's excursion over every tick so far (see :meth:`_track`)."""
+        self._track()
 
     @property
     def n(self) -> int:
@@ -192,9 +198,15 @@ class Plant:
         while self._events and self.time_s >= self._events[0].at_s - 1e-9:
             event = self._events.pop(0)
             self.change_load(event.mass, event.moment, event.com)
-        if not self._ideal:
+        if self._ideal:
+            self._advance_ideal()
+        else:
             self._advance_through_drives()
-            return
+        self.tick += 1
+        self._track()
+
+    def _advance_ideal(self) -> None:
+        """:meth:`advance` with ideal drives: the commanded forces, held over the period."""
         applied = tuple(self._commanded)
         fx = sum(f[0] for f in applied)
         fy = sum(f[1] for f in applied)
@@ -210,7 +222,6 @@ class Plant:
             body.torque = math.cos(angle) * cross_sum - math.sin(angle) * dot_sum
             step(dt)
         self._applied = applied
-        self.tick += 1
 
     def _advance_through_drives(self) -> None:
         """:meth:`advance` with the actuators' lag, gains and noise (see the module docstring):
@@ -248,7 +259,6 @@ class Plant:
         self._drive_force = forces
         m = self._substeps
         self._applied = tuple((acc[0] / m, acc[1] / m) for acc in total)
-        self.tick += 1
 
     def change_load(
         self, mass: float | None = None, moment: float | None = None, com: Vec2 | None = None
@@ -271,12 +281,22 @@ class Plant:
         if moment is not None:
             body.moment = float(moment)
 
-    def excursion(self) -> tuple[Vec2, Vec2, float]:
-        """The COM's position and velocity and ω now (cheaper than :meth:`truth`, for a check
-        at every tick)."""
+    def _com_position(self) -> Vec2:
+        """``p_C`` now."""
+        com = self._body.local_to_world(self._cog)
+        return (com.x, com.y)
+
+    def _track(self) -> None:
+        """Take the current tick ``k`` into the load's excursion (called at every tick, the
+        first included): ``largest_travel = max_k ‖p_C(t_k) − p_C(t_0)‖``, ``largest_speed =
+        max_k ‖ṗ_C(t_k)‖``, ``largest_omega = max_k |ω(t_k)|``; :meth:`truth` reports them,
+        so the floor is checked over every tick wherever the truth is read."""
         body = self._body
-        com = body.local_to_world(self._cog)
-        return (com.x, com.y), (body.velocity.x, body.velocity.y), body.angular_velocity
+        velocity = body.velocity
+        travel = math.dist(self._com_position(), self._start)
+        self.largest_travel = max(self.largest_travel, travel)
+        self.largest_speed = max(self.largest_speed, math.hypot(velocity.x, velocity.y))
+        self.largest_omega = max(self.largest_omega, abs(body.angular_velocity))
 
     def truth(self) -> Truth:
         """The ground truth at the current tick."""
@@ -297,4 +317,7 @@ class Plant:
             contact_to_com=tuple((com.x - p.x, com.y - p.y) for p in contacts),
             mass=body.mass,
             moment=body.moment,
+            largest_travel=self.largest_travel,
+            largest_speed=self.largest_speed,
+            largest_omega=self.largest_omega,
         )

@@ -299,7 +299,7 @@ def plot_com_observer(outcome: RunOutcome, path: Path) -> Path:
     _finish(ax_v, "m², (rad/s)²", "(c) $V = ½(\\|z_C - \\hat z_C\\|^2 + (ω - \\hat ω)^2)$")
     ax_v.legend(fontsize=8, loc="best")
     ax_v.set_xlabel("time [s]")
-    if rows:
+    if rows and rows[-1].time_s > rows[0].time_s:  # (one instant: matplotlib's own range)
         ax_v.set_xlim(rows[0].time_s, rows[-1].time_s)
     _figure_legend(fig, _phase_handles(outcome, since=rows[0].time_s if rows else 0.0), ncol=4)
     missing = "" if estimated else " (no estimate of $z_C$ in this run)"

@@ -32,14 +32,15 @@ and whether the truth fell inside each: ``|error| ≤ 1.96 σ`` for m and J, the
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from agent.algorithm.estimation.estimator import largest_std
-from agent.platform.geometry import Vec2
+from agent.platform import evaluation
+from agent.platform.evaluation import ERROR_KEYS, true_relative
 
 if TYPE_CHECKING:
-    from agent.platform.protocol import Estimates, Truth
+    from agent.platform.protocol import Estimates
     from simulator.inprocess import RunOutcome
     from simulator.scenario import Scenario
 
@@ -54,17 +55,6 @@ STEP_NAMES = {
     6: "COM velocity",
     7: "mass m",
 }
-ERROR_KEYS = (
-    "mass_rel",
-    "moment_rel",
-    "contact_to_com_m",
-    "relative_positions_m",
-    "centroid_offset_m",
-    "com_offset_m",
-    "com_observer_m",
-    "omega_rad_s",
-)
-"""The keys of :func:`errors`; the first five are those the project's accuracy aims bound."""
 
 
 # ------------------------------------------------------------------------------ small helpers
@@ -84,32 +74,7 @@ def _vec(value: Sequence[float] | None) -> list[float] | None:
     return None if x is None or y is None else [x, y]
 
 
-def _diff(a: Vec2, b: Vec2) -> Vec2:
-    return (a[0] - b[0], a[1] - b[1])
-
-
-def _worst(values: Iterable[float | None]) -> float | None:
-    """The largest of ``values``; None if any is None (the worst is then unknown) or none."""
-    items = list(values)
-    if not items or any(v is None for v in items):
-        return None
-    return _number(max(items))  # type: ignore[type-var]
-
-
-def _rel(estimate: float | None, truth: float) -> float | None:
-    return None if estimate is None else abs(estimate - truth) / abs(truth)
-
-
-def _dist(estimate: Sequence[float] | None, truth: Sequence[float]) -> float | None:
-    return None if estimate is None else math.dist(estimate, truth)
-
-
 # ------------------------------------------------------------------------------ truth
-def true_relative(truth: Truth, i: int, j: int) -> Vec2:
-    """``z_ij = p_Ci − p_Cj`` from the plant's truth (robots are 1-based)."""
-    return _diff(truth.contacts[i - 1], truth.contacts[j - 1])
-
-
 def _neighbours(outcome: RunOutcome) -> dict[int, tuple[int, ...]]:
     scenario = outcome.scenario
     return {i: scenario.neighbours(i) for i in range(1, scenario.n + 1)}
@@ -172,39 +137,25 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
 
 # ------------------------------------------------------------------------------ errors
 def robot_errors(outcome: RunOutcome, robot: int) -> dict[str, float | None]:
-    """Robot ``robot``'s errors against truth at the final instant (None: no estimate).
-
-    ``relative_positions_m`` is its worst ``‖ẑ_ij − z_ij‖`` over its graph neighbours ``j``.
-    """
-    truth = outcome.final.truth
-    est = outcome.final.estimates.get(robot)
-    if est is None:
-        return dict.fromkeys(ERROR_KEYS)
-    i = robot
-    return {
-        "mass_rel": _rel(est.mass, truth.mass),
-        "moment_rel": _rel(est.moment, truth.moment),
-        "contact_to_com_m": _dist(est.contact_to_com, truth.contact_to_com[i - 1]),
-        "relative_positions_m": _worst(
-            _dist(est.relative_positions.get(j), true_relative(truth, i, j))
-            for j in outcome.scenario.neighbours(i)
-        ),
-        "centroid_offset_m": _dist(est.centroid_offset, truth.centroid_offsets[i - 1]),
-        "com_offset_m": _dist(est.com_offset, truth.com_offset),
-        "com_observer_m": _dist(est.com_observer, truth.com_offset),
-        "omega_rad_s": None if est.omega is None else abs(est.omega - truth.omega),
-    }
+    """Robot ``robot``'s errors against truth at the final instant
+    (:func:`agent.platform.evaluation.robot_errors`: ``relative_positions_m`` over its graph
+    neighbours; None: no estimate)."""
+    final = outcome.final
+    neighbours = outcome.scenario.neighbours(robot)
+    return evaluation.robot_errors(final.estimates.get(robot), final.truth, neighbours)
 
 
 def errors(outcome: RunOutcome) -> dict[str, float | None]:
-    """The worst error over robots of each estimate at the final instant.
+    """The worst error over robots of each estimate at the final instant
+    (:func:`agent.platform.evaluation.team_errors`).
 
-    Keys are :data:`ERROR_KEYS`: ``mass_rel`` and ``moment_rel`` are relative
-    (``|m̂ − m| / m``), the ``_m`` keys are Euclidean distances in metres and ``omega_rad_s``
-    is ``|ω̂ − ω|``. A value is None when some robot has no such estimate.
+    Keys are :data:`~agent.platform.evaluation.ERROR_KEYS`: ``mass_rel`` and ``moment_rel``
+    are relative (``|m̂ − m| / m``), the ``_m`` keys are Euclidean distances in metres and
+    ``omega_rad_s`` is ``|ω̂ − ω|``. A value is None when some robot has no such estimate.
     """
-    per_robot = [robot_errors(outcome, i) for i in range(1, outcome.scenario.n + 1)]
-    return {key: _worst(e[key] for e in per_robot) for key in ERROR_KEYS}
+    final = outcome.final
+    found = evaluation.team_errors(final.estimates, final.truth, _neighbours(outcome))
+    return {key: _number(value) for key, value in found.items()}
 
 
 # ------------------------------------------------------------------------------ intervals
@@ -281,18 +232,14 @@ def step_times(outcome: RunOutcome) -> list[dict[str, Any]]:
 
 def floor_check(outcome: RunOutcome) -> dict[str, Any]:
     """The load's excursion against the scenario's floor: its COM's largest distance from
-    where it started (m), largest speed (m/s) and largest ``|ω|`` (rad/s), over every tick in
-    one process (:attr:`RunOutcome.excursion`), else over the recorded samples; the limits,
-    and whether all three were kept (``within``)."""
+    where it started (m), largest speed (m/s) and largest ``|ω|`` (rad/s) over every tick
+    from the start to the final instant, as the plant tracked them (the final truth's
+    ``largest_travel``, ``largest_speed`` and ``largest_omega``: the same figures in one
+    process and over Zenoh, whatever the launcher heard); the limits, and whether all three
+    were kept (``within``)."""
     floor = outcome.scenario.floor
-    if outcome.excursion is not None:
-        travel, speed, omega = (outcome.excursion[k] for k in ("travel_m", "speed", "omega"))
-    else:
-        samples = [s.truth for s in outcome.history] or [outcome.final.truth]
-        start = samples[0].com_position
-        travel = max(math.dist(t.com_position, start) for t in samples)
-        speed = max(math.hypot(*t.com_velocity) for t in samples)
-        omega = max(abs(t.omega) for t in samples)
+    truth = outcome.final.truth
+    travel, speed, omega = truth.largest_travel, truth.largest_speed, truth.largest_omega
     return {
         "travel_m": travel,
         "speed": speed,
@@ -533,7 +480,7 @@ def format_table(outcome: RunOutcome) -> str:
     regimes = ", ".join(f"{name} {t:.2f} s" for name, t in team_phases(outcome).items())
     lines.append("(start: the first robot began the step; end: the last robot's estimate settled)")
     lines.append(f"team force regimes from: {regimes or '-'}")
-    lines.append(_floor_line(floor_check(outcome)))
+    lines += _floor_lines(floor_check(outcome), outcome.final.time_s)
     changes = load_changes(outcome)
     if changes["changes"] or changes["restarts_s"]:
         lines.append(_changes_line(changes))
@@ -547,14 +494,16 @@ def format_table(outcome: RunOutcome) -> str:
     return "\n".join(lines)
 
 
-def _floor_line(floor: dict[str, Any]) -> str:
+def _floor_lines(floor: dict[str, Any], until_s: float) -> list[str]:
+    """The floor check, and what it was computed from (every tick up to ``until_s``)."""
     limits = floor["limits"]
     verdict = "within the floor" if floor["within"] else "LEFT THE FLOOR"
-    return (
+    return [
         f"load's largest travel {floor['travel_m']:.2f} m (limit {limits['travel_m']:g}),"
         f" speed {floor['speed']:.2f} m/s ({limits['speed']:g}),"
-        f" |ω| {floor['omega']:.2f} rad/s ({limits['omega']:g}): {verdict}"
-    )
+        f" |ω| {floor['omega']:.2f} rad/s ({limits['omega']:g}): {verdict}",
+        f"(the plant's figures over every tick from t = 0 to {until_s:.2f} s)",
+    ]
 
 
 def _changes_line(changes: dict[str, Any]) -> str:

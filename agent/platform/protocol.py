@@ -212,7 +212,12 @@ class Clock:
 @dataclass(frozen=True, slots=True)
 class Truth:
     """The load's ground truth at ``tick`` (vectors in ``W``). For evaluation and display
-    only: never given to agents."""
+    only: never given to agents.
+
+    The load's excursion so far, tracked by the plant at every tick ``k = 0 … tick`` (a
+    receiver that misses some of the plant's messages still gets the whole of it):
+    ``largest_travel = max_k ‖p_C(t_k) − p_C(t_0)‖`` (m), ``largest_speed = max_k ‖ṗ_C(t_k)‖``
+    (m/s) and ``largest_omega = max_k |ω(t_k)|`` (rad/s)."""
 
     tick: int
     time_s: float
@@ -233,6 +238,9 @@ class Truth:
     mass: float
     moment: float
     """Moment of inertia about the COM."""
+    largest_travel: float = 0.0
+    largest_speed: float = 0.0
+    largest_omega: float = 0.0
 
     @property
     def centroid(self) -> Vec2:
@@ -448,7 +456,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 7
+WIRE_VERSION = 8
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -790,6 +798,10 @@ def _truth(m: Truth) -> None:
         raise DecodeError("truth: contacts, contact_velocities, contact_to_com differ in length")
     if not (m.mass > 0 and m.moment > 0):
         raise DecodeError("truth: mass and moment must be positive")
+    for name in ("largest_travel", "largest_speed", "largest_omega"):
+        value = getattr(m, name)
+        if not (_math.isfinite(value) and value >= 0.0):
+            raise DecodeError(f"truth.{name} = {value!r} is not a finite number >= 0")
 
 
 def _plant_status(m: PlantStatus) -> None:

@@ -31,6 +31,11 @@ function fmt(value, digits) {
   return value === null || value === undefined ? "–" : Number(value).toFixed(digits);
 }
 
+// An error in the results' units (a fraction, metres) as the table shows it (%, mm).
+function scaled(value, factor) {
+  return value === null || value === undefined ? value : value * factor;
+}
+
 // ------------------------------------------------------------------------ time charts
 // The time charts are uPlot's (canvas: in heft bench --dashboard, 16 robots and three pages
 // on two cores, a chart's redraw took p99 25 ms, where Plotly's SVG charts took 277 ms).
@@ -559,8 +564,9 @@ function drawTable(scene) {
       + `${row.phase}${row.load_changes ? ` <span class="epoch">(load changes: ${row.load_changes})</span>` : ""}`
       + `${row.rejoins ? ` <span class="epoch">(begun again: rejoin ${row.rejoins})</span>` : ""}</td>`
       + `<td>${fmt(row.mass, 4)}</td><td>${fmt(row.moment, 4)}</td>`
-      + `<td>${fmt(e.mass_pct, 3)}</td><td>${fmt(e.moment_pct, 3)}</td>`
-      + `<td>${fmt(e.contact_to_com_mm, 2)}</td><td>${fmt(e.z_ij_mm, 2)}</td></tr>`);
+      + `<td>${fmt(scaled(e.mass_rel, 100), 3)}</td><td>${fmt(scaled(e.moment_rel, 100), 3)}</td>`
+      + `<td>${fmt(scaled(e.contact_to_com_m, 1000), 2)}</td>`
+      + `<td>${fmt(scaled(e.relative_positions_m, 1000), 2)}</td></tr>`);
   }
   if (table.truth) {
     rows.push(`<tr class="truth"><td>truth</td><td></td><td>${fmt(table.truth.mass, 4)}</td>`

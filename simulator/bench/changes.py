@@ -167,14 +167,9 @@ def format_change_report(results: Sequence[ChangeResult]) -> str:
         rows = [r for r in results if r.case == case]
         if not rows:
             continue
-        ours = [
-            _median([r.errors.get(key) for r in rows])
-            for key in ("mass_rel", "moment_rel", "contact_to_com_m")
-        ]
-        fits = [
-            _median([r.baseline.get(key) for r in rows])
-            for key in ("mass", "moment", "contact_to_com")
-        ]
+        keys = ("mass_rel", "moment_rel", "contact_to_com_m")
+        ours = [_median([r.errors.get(key) for r in rows]) for key in keys]
+        fits = [_median([r.baseline.get(key) for r in rows]) for key in keys]
         ratios = " / ".join(
             "-" if a is None or not b else f"{a / b:.2f}" for a, b in zip(ours, fits)
         )

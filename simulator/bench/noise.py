@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from agent.algorithm.tuning import Estimators
-from agent.platform.protocol import Measurement
+from agent.platform.evaluation import ERROR_KEYS, team_errors
+from agent.platform.protocol import Estimates, Measurement, Phase
 from simulator.inprocess import RunOutcome, run_inprocess
 from simulator.results import errors, floor_check, intervals
 from simulator.scenario import Actuators, Scenario
@@ -45,12 +46,13 @@ RATIO_GOAL = 1.5
 """Each median error within this factor of the baseline's."""
 COVERAGE_GOAL = (0.90, 0.99)
 QUANTITIES = (
-    ("m", "mass", 100.0, "%"),
-    ("J", "moment", 100.0, "%"),
-    ("contact_to_com", "contact_to_com", 1000.0, "mm"),
-    ("z_ij", "relative", 1000.0, "mm"),
+    ("m", "mass_rel", 100.0, "%"),
+    ("J", "moment_rel", 100.0, "%"),
+    ("contact_to_com", "contact_to_com_m", 1000.0, "mm"),
+    ("z_ij", "relative_positions_m", 1000.0, "mm"),
 )
-"""Label, key, display scale and unit of each error reported."""
+"""Label, key (:data:`~agent.platform.evaluation.ERROR_KEYS`), display scale and unit of each
+error reported."""
 GENERATED_PUSH_DAMPING = 2.0
 """N s/m: :attr:`NoiseSettings.push_damping` for the generated scenarios, whose loads (1 to
 50 kg, 3 to 8 robots) under one push force would otherwise swing by up to ``n f T/2m`` =
@@ -151,16 +153,6 @@ def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Est
     )
 
 
-def _worst(outcome: RunOutcome) -> dict[str, float | None]:
-    found = errors(outcome)
-    return {
-        "mass": found["mass_rel"],
-        "moment": found["moment_rel"],
-        "contact_to_com": found["contact_to_com_m"],
-        "relative": found["relative_positions_m"],
-    }
-
-
 def baseline_errors(
     outcome: RunOutcome,
     measured: list[list[Measurement]],
@@ -169,7 +161,8 @@ def baseline_errors(
 ) -> dict[str, float | None]:
     """The batch fit on the run's measurements from ``since_tick`` (at most
     :data:`~simulator.baseline.MAX_TICKS` of them) up to its final instant, against the truth
-    then (``None`` everywhere if the fit fails)."""
+    then, as the robots' estimates are (:func:`~agent.platform.evaluation.team_errors`; its
+    m, J, ``contact_to_com`` and ``z_ij``, ``None`` everywhere if the fit fails)."""
     from simulator.baseline import MAX_TICKS, fit
 
     truth = outcome.final.truth
@@ -183,22 +176,22 @@ def baseline_errors(
             v, f, outcome.scenario.period_s, settings.velocity_noise, settings.force_noise, first
         )
     except ValueError:
-        return dict.fromkeys(("mass", "moment", "contact_to_com", "relative"))
-    n = outcome.scenario.n
-    ctc = max(math.dist(found.contact_to_com[i], truth.contact_to_com[i]) for i in range(n))
-    rel = 0.0
-    for i, j in outcome.scenario.edges:
-        true = (
-            truth.contacts[i - 1][0] - truth.contacts[j - 1][0],
-            truth.contacts[i - 1][1] - truth.contacts[j - 1][1],
+        return dict.fromkeys(ERROR_KEYS)
+    scenario = outcome.scenario
+    graph = {i: scenario.neighbours(i) for i in range(1, scenario.n + 1)}
+    fitted = {
+        i: Estimates(
+            robot=i,
+            tick=truth.tick,
+            phase=Phase.DONE,
+            mass=found.mass,
+            moment=found.moment,
+            contact_to_com=found.contact_to_com[i - 1],
+            relative_positions={j: found.relative_position(i, j) for j in neighbours},
         )
-        rel = max(rel, math.dist(found.relative_position(i, j), true))
-    return {
-        "mass": abs(found.mass - truth.mass) / truth.mass,
-        "moment": abs(found.moment - truth.moment) / truth.moment,
-        "contact_to_com": ctc,
-        "relative": rel,
+        for i, neighbours in graph.items()
     }
+    return team_errors(fitted, truth, graph)
 
 
 def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResult:
@@ -211,11 +204,11 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
     )
     paper = run_inprocess(noisy(scenario, settings, seed, Estimators.PAPER), record_every=1000)
     inside: dict[str, list[bool]] = {key: [] for _, key, _, _ in QUANTITIES}
-    names = {  # this module's keys, those of simulator.results.intervals
-        "mass": "mass",
-        "moment": "moment",
-        "contact_to_com": "contact_to_com",
-        "relative": "relative_positions",
+    names = {  # the errors' keys, those of simulator.results.intervals
+        "mass_rel": "mass",
+        "moment_rel": "moment",
+        "contact_to_com_m": "contact_to_com",
+        "relative_positions_m": "relative_positions",
     }
     for i in range(1, scenario.n + 1):
         row = intervals(robust, i)
@@ -226,8 +219,8 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
                 inside[key].append(bool(row[name][1]))
     return SeedResult(
         seed=seed,
-        robust=_worst(robust),
-        paper=_worst(paper),
+        robust=errors(robust),
+        paper=errors(paper),
         baseline=baseline_errors(robust, measured, settings),
         robust_time_s=robust.sim_time_s,
         robust_done=robust.converged,

@@ -174,6 +174,9 @@ TRUTH = Truth(
     contact_to_com=((2.0, -0.538889), (1.0, 0.861111)),
     mass=5.0,
     moment=12.3795,
+    largest_travel=0.25,
+    largest_speed=0.75,
+    largest_omega=1.0,
 )
 CONTROL = Control("stop")
 PLANT_STATUS = PlantStatus(tick=6000, time_s=60.0, clock="realtime", lost=(2,), latency_ms_p50=0.4)
@@ -430,6 +433,7 @@ def test_json_messages_are_checked_too() -> None:
     assert "step" in str(rejects(Estimates, encode(_with(ESTIMATES_FULL, started={9: 1}))))
     assert "clock" in str(rejects(PlantStatus, encode(_with(PLANT_STATUS, clock="sundial"))))
     assert "positive" in str(rejects(Truth, encode(_with(TRUTH, mass=-5.0))))
+    assert "largest_speed" in str(rejects(Truth, encode(_with(TRUTH, largest_speed=-0.1))))
 
 
 # ----------------------------------------------------------------------------- DecodeError

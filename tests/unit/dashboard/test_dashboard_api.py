@@ -57,7 +57,7 @@ def test_snapshot_and_summary_of_a_run(paper_run) -> None:
         summary = client.get("/api/summary").json()
         assert summary["final"] and summary["tick"] == outcome.final.truth.tick
         assert summary["robots"]["1"]["mass"] == outcome.final.estimates[1].mass
-        assert summary["worst"]["mass_pct"] < 0.01
+        assert summary["worst"]["mass_rel"] < 1e-4
         series = client.get("/api/series").json()
         assert abs(series["mass/2"][-1][1] - 5.0) < 1e-3
 

@@ -60,6 +60,8 @@ def feed(state: TeamState, outcome) -> None:
 
 
 def test_the_charts_converge_to_the_truth_and_the_final_table_is_the_runs(paper_run) -> None:
+    from simulator.results import robot_errors
+
     scenario, outcome = paper_run
     state = TeamState("paper", LoadGeometry.from_scenario(scenario))
     feed(state, outcome)
@@ -83,7 +85,8 @@ def test_the_charts_converge_to_the_truth_and_the_final_table_is_the_runs(paper_
         row = final["robots"][str(i)]
         assert row["mass"] == est.mass and row["moment"] == est.moment
         assert tuple(row["contact_to_com"]) == est.contact_to_com
-        assert row["errors"]["mass_pct"] < 0.01 and row["errors"]["contact_to_com_mm"] < 1.0
+        assert row["errors"]["mass_rel"] < 1e-4 and row["errors"]["contact_to_com_m"] < 1e-3
+        assert row["errors"] == robot_errors(outcome, i)  # the results' own figures
     assert state.done and not state.halted
     # The phase timeline: every robot went through the four phases in order, the team
     # switched together, and the charts' time axis is simulated seconds.
@@ -116,7 +119,9 @@ def test_the_pages_scene_is_the_scene_less_what_the_page_does_not_draw(paper_run
         full, drawn = scene["robots"][i], page["robots"][i]
         assert drawn == {k: full[k] for k in ("phase", "tick", "segments", "alive")}
         row = page["table"]["robots"][i]
-        assert row["errors"] == final["robots"][i]["errors"]
+        errors = final["robots"][i]["errors"]
+        drawn = ("mass_rel", "moment_rel", "contact_to_com_m", "relative_positions_m")
+        assert row["errors"] == {key: errors[key] for key in drawn}
         assert (row["mass"], row["moment"]) == (
             final["robots"][i]["mass"],
             final["robots"][i]["moment"],

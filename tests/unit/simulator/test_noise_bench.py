@@ -23,7 +23,12 @@ from tests.helpers.paths import PAPER
 def _result(
     seed: int, scale: float, done: float = 12.0, inside: bool = True, travel: float = 0.5
 ) -> SeedResult:
-    errors = {"mass": 0.001, "moment": 0.004, "contact_to_com": 0.004, "relative": 0.002}
+    errors = {
+        "mass_rel": 0.001,
+        "moment_rel": 0.004,
+        "contact_to_com_m": 0.004,
+        "relative_positions_m": 0.002,
+    }
     return SeedResult(
         seed=seed,
         robust={k: scale * v for k, v in errors.items()},
@@ -39,9 +44,9 @@ def _result(
 
 def test_the_report_judges_each_goal() -> None:
     good = [_result(s, 1.2, inside=s != 0) for s in range(20)]  # 76 of 80 inside: 95 %
-    assert median(good, "robust", "mass") == pytest.approx(0.0012)
-    assert median(good, "paper", "mass") is None  # some run has none: unbounded
-    assert coverage(good, "moment") == (76, 80)
+    assert median(good, "robust", "mass_rel") == pytest.approx(0.0012)
+    assert median(good, "paper", "mass_rel") is None  # some run has none: unbounded
+    assert coverage(good, "moment_rel") == (76, 80)
     report = format_noise_report(good, NoiseSettings(), "scenario 'paper'", 10.0)
     assert report.endswith(": met")
     assert "m (%)" in report and "1.20" in report and "95 % of 80" in report
@@ -71,9 +76,10 @@ def test_one_seed_against_the_centralized_fit() -> None:
     settings = NoiseSettings(seeds=1, max_time_s=25.0)
     result = run_seed(load_scenario(PAPER), dataclasses.replace(settings), 1)
     assert result.robust_done and not result.paper_done
-    assert result.robust["mass"] < 0.03 and result.baseline["mass"] < 0.02
-    assert result.baseline["relative"] < 0.005 and result.robust["relative"] < 0.01
-    assert result.paper["mass"] is None
+    assert result.robust["mass_rel"] < 0.03 and result.baseline["mass_rel"] < 0.02
+    assert result.baseline["relative_positions_m"] < 0.005
+    assert result.robust["relative_positions_m"] < 0.01
+    assert result.paper["mass_rel"] is None
     assert all(len(flags) == 4 for flags in result.inside.values())
     assert result.floor["within"], result.floor
 
@@ -92,7 +98,7 @@ def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:
             on_floor=True,
             baseline={}
             if case == "none"
-            else {"mass": 0.004, "moment": 0.01, "contact_to_com": 0.012},
+            else {"mass_rel": 0.004, "moment_rel": 0.01, "contact_to_com_m": 0.012},
         )
 
     results = [row(s, c, 0.006 + 0.001 * s) for s in range(3) for c in ("mass", "com", "none")]

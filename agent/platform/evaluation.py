@@ -1,0 +1,111 @@
+"""Estimates judged against the truth: pure functions over protocol messages.
+
+Whatever follows a run (the launcher's results, the dashboard, the benchmarks) judges the
+robots' :class:`~agent.platform.protocol.Estimates` against the plant's
+:class:`~agent.platform.protocol.Truth` of the same instant with these, so that every one of
+them gives the same figures under the same names:
+
+- :func:`final_instant`: the instant a run's estimates are evaluated at;
+- :func:`robot_errors`: one robot's errors, :data:`ERROR_KEYS`, in SI units;
+- :func:`team_errors`: the worst of each over the team.
+
+Conventions (those of :mod:`agent.platform.protocol`): ``contact_to_com`` of robot ``i`` is
+``p_C − p_Ci``; ``relative_positions[j]`` is ``z_ij = p_Ci − p_Cj``; ``centroid_offset`` is
+``z_i = p_Ci − p_G``; ``com_offset`` is ``z_C = p_G − p_C``, and ``com_observer`` observer
+(24)'s ``ẑ_C``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+
+from agent.platform.geometry import Vec2
+from agent.platform.protocol import Estimates, Phase, Truth
+
+ERROR_KEYS = (
+    "mass_rel",
+    "moment_rel",
+    "contact_to_com_m",
+    "relative_positions_m",
+    "centroid_offset_m",
+    "com_offset_m",
+    "com_observer_m",
+    "omega_rad_s",
+)
+"""The errors of :func:`robot_errors`: ``mass_rel`` and ``moment_rel`` are relative
+(``|m̂ − m| / m``, a fraction, not a percentage), the ``_m`` keys Euclidean distances in
+metres, ``omega_rad_s`` is ``|ω̂ − ω|``. The first five are those the project's accuracy
+aims bound."""
+
+
+def final_instant(latest: Sequence[Estimates | None], end_tick: int = 0) -> int | None:
+    """The instant a run's estimates are evaluated at: the first at which every robot was
+    done, ``t_f = max(end_tick, max_i phase_since_i)`` over each robot's latest estimates
+    (``latest``: one entry per robot of the team), not before the scenario's ``end_tick`` (its
+    load changes and hold); ``None`` while some robot is not done or has said nothing."""
+    if not latest or any(est is None or est.phase != Phase.DONE for est in latest):
+        return None
+    return max(end_tick, *(est.phase_since for est in latest))  # type: ignore[union-attr]
+
+
+def true_relative(truth: Truth, i: int, j: int) -> Vec2:
+    """``z_ij = p_Ci − p_Cj`` from the plant's truth (robots are 1-based)."""
+    (xi, yi), (xj, yj) = truth.contacts[i - 1], truth.contacts[j - 1]
+    return (xi - xj, yi - yj)
+
+
+def _known(value: float) -> float | None:
+    """``value``, or None when it is not finite (an estimate that is not a number is none)."""
+    return value if math.isfinite(value) else None
+
+
+def _rel(estimate: float | None, truth: float) -> float | None:
+    return None if estimate is None else _known(abs(estimate - truth) / abs(truth))
+
+
+def _dist(estimate: Sequence[float] | None, truth: Sequence[float]) -> float | None:
+    return None if estimate is None else _known(math.dist(estimate, truth))
+
+
+def _worst(values: Iterable[float | None]) -> float | None:
+    """The largest of ``values``; None if any is None (the worst is then unknown) or none."""
+    items = list(values)
+    if not items or any(v is None for v in items):
+        return None
+    return max(items)  # type: ignore[type-var]
+
+
+def robot_errors(
+    est: Estimates | None, truth: Truth, neighbours: Iterable[int]
+) -> dict[str, float | None]:
+    """Robot ``est.robot``'s errors against ``truth`` (:data:`ERROR_KEYS`); None where it has
+    no such estimate (all None for a robot that reported nothing).
+
+    ``relative_positions_m`` is its worst ``‖ẑ_ij − z_ij‖`` over ``neighbours`` (robots of
+    the truth), None if it lacks any of them."""
+    if est is None:
+        return dict.fromkeys(ERROR_KEYS)
+    i = est.robot
+    return {
+        "mass_rel": _rel(est.mass, truth.mass),
+        "moment_rel": _rel(est.moment, truth.moment),
+        "contact_to_com_m": _dist(est.contact_to_com, truth.contact_to_com[i - 1]),
+        "relative_positions_m": _worst(
+            _dist(est.relative_positions.get(j), true_relative(truth, i, j)) for j in neighbours
+        ),
+        "centroid_offset_m": _dist(est.centroid_offset, truth.centroid_offsets[i - 1]),
+        "com_offset_m": _dist(est.com_offset, truth.com_offset),
+        "com_observer_m": _dist(est.com_observer, truth.com_offset),
+        "omega_rad_s": None if est.omega is None else _known(abs(est.omega - truth.omega)),
+    }
+
+
+def team_errors(
+    estimates: Mapping[int, Estimates], truth: Truth, graph: Mapping[int, Iterable[int]]
+) -> dict[str, float | None]:
+    """The worst of each of :func:`robot_errors` over the team: the robots of ``graph`` (each
+    robot's neighbours), with their ``estimates``; None where some robot has no such
+    estimate (the worst is then unknown)."""
+    rows = [robot_errors(estimates.get(i), truth, graph[i]) for i in graph]
+    return {key: _worst(row[key] for row in rows) for key in ERROR_KEYS}

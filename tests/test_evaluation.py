@@ -1,0 +1,112 @@
+"""Estimates judged against the truth (agent/platform/evaluation.py), by hand-made messages
+whose errors are known: the keys and units every user shares, missing and non-finite
+estimates, the worst over a team, and the final instant."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from agent.platform.evaluation import ERROR_KEYS, final_instant, robot_errors, team_errors
+from agent.platform.protocol import Estimates, Phase, Truth
+
+# Three contacts around a COM at the origin: p_G = (0, 1/3), z_C = p_G − p_C = (0, 1/3).
+CONTACTS = ((-1.0, 0.0), (1.0, 0.0), (0.0, 1.0))
+TRUTH = Truth(
+    tick=100,
+    time_s=1.0,
+    com_position=(0.0, 0.0),
+    angle=0.0,
+    com_velocity=(0.0, 0.0),
+    omega=0.5,
+    contacts=CONTACTS,
+    contact_velocities=((0.0, 0.0),) * 3,
+    contact_to_com=tuple((-x, -y) for x, y in CONTACTS),
+    mass=4.0,
+    moment=2.0,
+)
+GRAPH = {1: (2,), 2: (1, 3), 3: (2,)}
+
+
+def estimates(robot: int, **changes) -> Estimates:
+    """Robot ``robot``'s exact estimates, but for ``changes``."""
+    x, y = CONTACTS[robot - 1]
+    exact = {
+        "mass": 4.0,
+        "moment": 2.0,
+        "omega": 0.5,
+        "contact_to_com": (-x, -y),
+        "relative_positions": {
+            j: (x - CONTACTS[j - 1][0], y - CONTACTS[j - 1][1]) for j in GRAPH[robot]
+        },
+        "centroid_offset": (x, y - 1 / 3),
+        "com_offset": (0.0, 1 / 3),
+        "com_observer": (0.0, 1 / 3),
+    }
+    return Estimates(robot=robot, tick=100, phase=Phase.DONE, **{**exact, **changes})
+
+
+def test_errors_are_relative_for_m_and_j_metres_for_offsets_rad_s_for_omega() -> None:
+    est = estimates(
+        2,
+        mass=4.1,
+        moment=1.9,
+        omega=0.45,
+        contact_to_com=(-1.0, 0.003),
+        relative_positions={1: (2.0, 0.004), 3: (1.0, -1.0)},
+        centroid_offset=(1.0, -1 / 3 + 0.005),
+        com_offset=(0.006, 1 / 3),
+        com_observer=(0.0, 1 / 3 - 0.007),
+    )
+    found = robot_errors(est, TRUTH, GRAPH[2])
+    assert tuple(found) == ERROR_KEYS
+    assert found == pytest.approx(
+        {
+            "mass_rel": 0.025,
+            "moment_rel": 0.05,
+            "contact_to_com_m": 0.003,
+            "relative_positions_m": 0.004,  # the worse of its two edges
+            "centroid_offset_m": 0.005,
+            "com_offset_m": 0.006,
+            "com_observer_m": 0.007,
+            "omega_rad_s": 0.05,
+        }
+    )
+    exact = robot_errors(estimates(2), TRUTH, GRAPH[2])
+    assert exact == pytest.approx(dict.fromkeys(ERROR_KEYS, 0.0), abs=1e-15)
+
+
+def test_what_was_not_estimated_has_no_error() -> None:
+    assert robot_errors(None, TRUTH, (2,)) == dict.fromkeys(ERROR_KEYS)
+    early = robot_errors(Estimates(robot=1, tick=3, phase=Phase.EXCITE), TRUTH, (2,))
+    assert early == dict.fromkeys(ERROR_KEYS)
+    # One edge of two unknown: the worst over the neighbours is unknown.
+    lacking = estimates(2, relative_positions={1: (2.0, 0.0)})
+    assert robot_errors(lacking, TRUTH, GRAPH[2])["relative_positions_m"] is None
+    assert robot_errors(lacking, TRUTH, (1,))["relative_positions_m"] == 0.0
+    # An estimate that is not a number is none.
+    found = robot_errors(estimates(1, mass=math.nan, com_offset=(math.inf, 0.0)), TRUTH, (2,))
+    assert found["mass_rel"] is None and found["com_offset_m"] is None
+    assert found["moment_rel"] == 0.0
+
+
+def test_the_team_error_is_the_worst_robots_or_unknown() -> None:
+    team = {1: estimates(1, mass=4.2), 2: estimates(2, mass=3.6), 3: estimates(3)}
+    worst = team_errors(team, TRUTH, GRAPH)
+    assert worst["mass_rel"] == pytest.approx(0.1) and worst["moment_rel"] == 0.0
+    del team[3]
+    assert team_errors(team, TRUTH, GRAPH) == dict.fromkeys(ERROR_KEYS)
+
+
+def test_the_final_instant_is_the_first_at_which_every_robot_is_done() -> None:
+    def done(robot: int, since: int) -> Estimates:
+        return Estimates(robot=robot, tick=since + 5, phase=Phase.DONE, phase_since=since)
+
+    team = [done(1, 840), done(2, 847), done(3, 845)]
+    assert final_instant(team) == 847
+    assert final_instant(team, end_tick=900) == 900  # not before the scenario's end
+    pushing = Estimates(robot=2, tick=850, phase=Phase.PUSH, phase_since=627)
+    assert final_instant([team[0], pushing, team[2]]) is None
+    assert final_instant([team[0], None, team[2]]) is None  # robot 2 has said nothing
+    assert final_instant([]) is None
