@@ -12,6 +12,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -25,6 +26,7 @@ from simulator import launcher
 from simulator.scenario import load_scenario
 from tests.conftest import (
     PAPER,
+    ROOT,
     FakeFifo,
     agent_pid,
     child_pid,
@@ -375,3 +377,31 @@ def test_the_final_instant_is_the_first_at_which_every_robot_is_done(monkeypatch
             monkeypatch.setattr(launcher, "FINAL_GRACE_S", 0.0)
             assert collector.finished() and collector.final.truth.tick == 101
             monkeypatch.undo()
+
+
+# ------------------------------------------------------------------------------ stopping
+SIGNAL_TO_ANOTHER_THREAD = """
+import os, signal, threading
+from agent.platform.process import stop_on_signals
+
+stop = stop_on_signals()
+threading.Thread(target=threading.Event().wait, args=(60,), daemon=True).start()
+signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})  # only that thread can take it
+os.kill(os.getpid(), signal.SIGTERM)
+stop.wait()
+print("stopped")
+"""
+
+
+def test_a_stop_signal_taken_by_another_thread_still_stops_the_wait() -> None:
+    """The kernel hands SIGTERM to a thread other than the main one (as it may to Zenoh's or
+    the log relay's): the main thread's ``stop.wait()`` still returns (with a plain
+    ``threading.Event`` it waits for ever)."""
+    done = subprocess.run(
+        [sys.executable, "-c", SIGNAL_TO_ANOTHER_THREAD],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=20,
+    )
+    assert (done.returncode, done.stdout) == (0, "stopped\n"), done.stderr
