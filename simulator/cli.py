@@ -718,7 +718,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         raise UsageError(f"{source}: {err}") from None
     settings = zenoh_settings(args, base)
     link = _can_link(args)
-    setup_logging()
+    setup_logging(args)
     try:
         return run_plant(
             scenario,

@@ -23,16 +23,15 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform import zenoh_session
 from agent.platform.children import free_port
 from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_settings
 from agent.platform.config import ConfigError
 from agent.platform.dispatch import main
 from agent.platform.protocol import Control, Keys, encode
 from agent.platform.zenoh_session import (
-    PLAIN_WARNING,
     SessionError,
     ZenohSettings,
+    describe,
     open_session,
     zenoh_config,
 )
@@ -645,22 +644,42 @@ def test_a_client_without_the_teams_certificate_cannot_connect(
 
 
 @pytest.mark.slow
-def test_plain_sessions_are_logged_once(caplog, monkeypatch) -> None:
-    monkeypatch.setattr(zenoh_session, "_warned_plain", False)
-    settings = ZenohSettings(mode="peer", connect=(), listen=(f"tcp/127.0.0.1:{free_port()}",))
+def test_each_session_says_it_is_on_plain_links(caplog) -> None:
+    ports = [free_port(), free_port()]
     with caplog.at_level(logging.INFO, logger="heft.zenoh"):
-        with open_session(settings):
-            pass
-        with open_session(dataclasses.replace(settings, listen=(f"tcp/127.0.0.1:{free_port()}",))):
-            pass
-    assert [r.getMessage() for r in caplog.records if r.name == "heft.zenoh"] == [PLAIN_WARNING]
+        for port in ports:
+            settings = ZenohSettings(mode="peer", connect=(), listen=(f"tcp/127.0.0.1:{port}",))
+            with open_session(settings):
+                pass
+    assert [r.getMessage() for r in caplog.records if r.name == "heft.zenoh"] == [
+        f"zenoh peer: listen tcp/127.0.0.1:{port}; plain tcp: no TLS, no certificates (for"
+        " loopback runs only); access control off; multicast scouting off"
+        for port in ports
+    ]
 
 
 @pytest.mark.slow
-def test_tls_sessions_are_not_logged_as_plain(network: Network, caplog, monkeypatch) -> None:
-    monkeypatch.setattr(zenoh_session, "_warned_plain", False)
+def test_a_tls_session_says_which_certificate_it_shows(network: Network, certs, caplog) -> None:
     with caplog.at_level(logging.INFO, logger="heft.zenoh"):
         with open_session(network.settings("dashboard")):
             pass
-    assert [r for r in caplog.records if r.name == "heft.zenoh"] == []
+    [line] = [r.getMessage() for r in caplog.records if r.name == "heft.zenoh"]
+    assert line == (
+        f"zenoh client: connect {network.endpoint}; mutual TLS: shows {certs}/dashboard.pem,"
+        f" trusts {certs}/ca.pem; access control off; multicast scouting off"
+    )
     assert not any("PRIVATE KEY" in r.getMessage() for r in caplog.records)
+
+
+def test_the_secured_routers_config_says_tls_and_access_control(certs, tmp_path) -> None:
+    """What the router of :class:`Network` has in force, read back from its final config."""
+    path = tmp_path / "router.json5"
+    path.write_text(router_config_text(TEAM, 4, LINE, ["tls/127.0.0.1:7447"], str(certs)), "utf-8")
+    router = ZenohSettings(
+        mode="router", connect=(), listen=("tls/127.0.0.1:7447",), config_file=str(path)
+    )
+    assert describe(zenoh_config(router)) == (
+        "zenoh router: listen tls/127.0.0.1:7447; mutual TLS: clients must show a certificate"
+        f" signed by {certs}/ca.pem; access control on: default deny, 7 subjects;"
+        " multicast scouting off"
+    )
