@@ -381,6 +381,7 @@ def _watch(args: argparse.Namespace, scenario: Scenario, stop: threading.Event) 
     except ValueError as err:
         raise UsageError(f"--team: {err}") from None
     settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
+    setup_logging(args)
 
     def report(time_s: float, phases: str) -> None:
         if not args.quiet:

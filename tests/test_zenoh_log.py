@@ -95,6 +95,8 @@ def test_zenohs_lines_become_records_of_their_level_and_target() -> None:
     assert spans.target == "zenoh::net::routing::hat::router::pubsub"
     trace = zenoh_log.parse(MAIN_THREAD.replace(" INFO", "TRACE"))
     assert trace.level == zenoh_log.TRACE == 5
+    bare = zenoh_log.parse(MAIN_THREAD.replace("ThreadId(01) ", ""))  # without thread ids
+    assert (bare.target, bare.message) == (main.target, main.message)
 
 
 @pytest.mark.parametrize(
@@ -130,15 +132,44 @@ def test_the_level_is_the_options_else_rust_log_else_the_commands() -> None:
 
 
 @pytest.mark.slow
-def test_a_library_caller_routes_nothing() -> None:
-    """Without a process command's request (setup_logging) a session leaves Zenoh's log and
-    standard output alone (here: pytest's own capture of descriptor 1)."""
+def test_a_library_caller_routes_nothing(capsys) -> None:
+    """A command called with its arguments (as tests do), not run as the process's program,
+    and a session opened as a library leave Zenoh's log and standard output alone (here:
+    pytest's own capture of descriptor 1)."""
+    from agent.platform.dispatch import main
+
     before = os.fstat(1)
-    settings = ZenohSettings(mode="peer", connect=(), listen=(f"tcp/127.0.0.1:{free_port()}",))
-    with open_session(settings):
-        after = os.fstat(1)
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    with open_session(ZenohSettings(mode="peer", connect=(), listen=(listen,))):
+        assert main(["router", "--listen", listen]) == 4  # its port is taken: no router
+    after = os.fstat(1)
     assert (after.st_dev, after.st_ino) == (before.st_dev, before.st_ino)
     assert zenoh_log.in_force() is None
+    assert capsys.readouterr().err.strip().endswith("address already in use")
+
+
+ZENOH_COMMANDS = {
+    "agent": "warn",
+    "bridge": "warn",
+    "sim": "warn",
+    "dashboard": "warn",
+    "record": "warn",
+    "watch": "warn",
+    "router": "info",
+}
+
+
+@pytest.mark.parametrize("command", ZENOH_COMMANDS)
+def test_every_process_command_takes_the_zenoh_log_level(command: str) -> None:
+    from agent.platform.dispatch import build_parser
+
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    sub = commands.choices[command]
+    text = " ".join(sub.format_help().split())
+    assert "--zenoh-log LEVEL" in text
+    assert f"in Zenoh's filter syntax, if set, else {ZENOH_COMMANDS[command]})" in text
+    assert sub.get_default("zenoh_log_default") == ZENOH_COMMANDS[command]
 
 
 # ------------------------------------------------------------------------------ endpoints

@@ -29,11 +29,13 @@ Measured with eclipse-zenoh 1.10.2: a router logs each refused handshake (no cer
 foreign CA, plain TCP on its TLS port) at ``warn``, a certificate that matches no subject of
 its access control at ``info``.
 
-Only a process that asked for it (:func:`request`, called by
-:func:`agent.platform.command_line.setup_logging`) routes Zenoh's log, from its first session
-on (:func:`agent.platform.zenoh_session.open_session` calls :func:`start`): a library caller's
-standard output (a test's) is left alone, and so is that of a command that never opens Zenoh.
-Rust's ``tracing`` takes its subscriber once per process: the first choice stands.
+Only a process whose own program is the ``heft`` command (:func:`enable`, by
+:func:`agent.platform.dispatch.main` run from the command line) and whose command asked for it
+(:func:`request`, by :func:`agent.platform.command_line.setup_logging`) routes Zenoh's log,
+from its first session on (:func:`agent.platform.zenoh_session.open_session` calls
+:func:`start`): the standard output of a process that calls commands or opens sessions as a
+library (a test's) is left alone, and so is that of a command that never opens Zenoh. Rust's
+``tracing`` takes its subscriber once per process: the first choice stands.
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ JOIN_S = 2.0
 _EVENT = re.compile(
     r"^(?P<time>\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?Z)\s+"
     r"(?P<level>TRACE|DEBUG|INFO|WARN|ERROR)\s+"
-    r"(?:\S+\s+)?(?:ThreadId\(\d+\)\s+)?"  # the thread's name, if any, and id
+    r"(?:(?:\S+\s+)?ThreadId\(\d+\)\s+)?"  # the thread's name, if any, and id
     r"(?P<message>.*)$"
 )
 _TARGET = re.compile(r"(?<![\w:])([A-Za-z_]\w*(?:::\w+)+): ")  # a module path
@@ -209,6 +211,7 @@ class _Relay(threading.Thread):
             pass
 
 
+_enabled = False
 _requested: Choice | None = None
 _started: Choice | None = None
 _relay: _Relay | None = None
@@ -216,10 +219,20 @@ _real_stdout: int | None = None
 _lock = threading.Lock()
 
 
-def request(level: str | None, default: str = DEFAULT_LEVEL) -> Choice:
+def enable() -> None:
+    """This process is the ``heft`` command: its standard output is its own, and its command
+    may route Zenoh's log (:func:`request`)."""
+    global _enabled
+    _enabled = True
+
+
+def request(level: str | None, default: str = DEFAULT_LEVEL) -> Choice | None:
     """Route Zenoh's log into this process's log from its first session on, with the filter
-    :func:`choose` picks; returns it."""
+    :func:`choose` picks, once :func:`enable` was called; returns the choice that stands (None:
+    not enabled)."""
     global _requested
+    if not _enabled:
+        return None
     choice = choose(level, default)
     with _lock:
         if _requested is None:
