@@ -31,24 +31,22 @@ def cmd_agent(args: argparse.Namespace) -> int:
     except ConfigError as err:
         raise UsageError(str(err)) from None
     config = dataclasses.replace(config, zenoh=zenoh_settings(args, config.zenoh))
-    setup_logging()
+    setup_logging(args)
     return run_agent(config)
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    """``heft router``: run a Zenoh router until a signal."""
+    """``heft router``: run a Zenoh router until a signal. Its session says in the log what
+    is in force (endpoints, TLS, access control: :func:`~agent.platform.zenoh_session.describe`)."""
     from agent.platform.process import stop_on_signals
     from agent.platform.zenoh_session import open_session
 
     base = ZenohSettings(mode="router", connect=(), listen=(DEFAULT_ROUTER,))
     settings = zenoh_settings(args, base)
-    setup_logging()
+    setup_logging(args)
     log = logging.getLogger("heft.router")
     stop = stop_on_signals()
     with open_session(settings):
-        log.info("router listening on %s", ", ".join(settings.listen))
-        if settings.connect:
-            log.info("router connecting to %s", ", ".join(settings.connect))
         stop.wait()
     log.info("router stopped")
     return 0
@@ -203,8 +201,8 @@ def _add_deploy(commands: argparse._SubParsersAction) -> None:
             "processes do (robot-<i>: its robot's keys and its graph neighbours' shares;\n"
             "plant; operator: may stop runs; dashboard: listens).\n"
             "See agent/security/access_control.py.\n"
-            "Run the router with: heft router --zenoh-config FILE --listen ENDPOINT\n"
-            "(or zenohd --config FILE).\n\n"
+            "Run the router with: heft router --zenoh-config FILE (it listens on the file's\n"
+            "endpoints), or zenohd --config FILE.\n\n"
             "Exit status: 0 written, 2 bad arguments (one 'heft: error:' line)."
         ),
         epilog="example: heft deploy router-config --team paper --robots 4 --edges 1-2 2-3 3-4 \\\n"
@@ -253,7 +251,8 @@ def register(commands: argparse._SubParsersAction) -> None:
             "endpoints, link faults to inject and the tuning; see agent/node.py\n"
             "(AgentNodeConfig). --connect, --listen, --zenoh-config and --tls-* replace its\n"
             "[zenoh] table's connect, listen, config_file, root_ca, certificate and\n"
-            "private_key.\n\n"
+            "private_key; a Zenoh config file's endpoints, where it gives them, replace\n"
+            "connect and listen.\n\n"
             "Every value of the config has a range (README: Limits), checked before anything\n"
             "starts.\n\n"
             "Exit status: 0 stopped (told to, or by SIGINT/SIGTERM/SIGHUP), 2 bad config or\n"
@@ -282,15 +281,25 @@ def register(commands: argparse._SubParsersAction) -> None:
         help="a Zenoh router (no separate binary needed)",
         formatter_class=HelpFormatter,
         description=(
-            "Run a Zenoh router on the given endpoints until SIGINT/SIGTERM/SIGHUP.\n"
-            "Multicast scouting is off: clients must name its endpoint.\n\n"
+            "Run a Zenoh router until SIGINT/SIGTERM/SIGHUP, listening on the endpoints of\n"
+            "--listen, else those of the --zenoh-config file, else tcp/127.0.0.1:7447.\n"
+            "Multicast scouting is off: clients must name its endpoint. At start it logs\n"
+            "what is in force: endpoints (tls or plain), mutual TLS, access control.\n"
+            "Zenoh's own log joins its log at --zenoh-log's level (else RUST_LOG's, else\n"
+            "info, as zenohd): at warn each refused handshake (no certificate, a foreign CA,\n"
+            "plain tcp on a tls port), at info each certificate name its access control does\n"
+            "not know.\n\n"
             "Exit status: 0 stopped, 2 bad arguments (one 'heft: error:' line), 4 a port that\n"
             "is busy or not on this machine (one 'heft: error:' line)."
         ),
-        epilog="example: heft router --listen tls/192.168.10.1:7447 --zenoh-config"
-        " /etc/heft/router.json5",
+        epilog="example: heft router --zenoh-config /etc/heft/router.json5 --zenoh-log info",
     )
-    add_zenoh_options(router, connect="none", listen=DEFAULT_ROUTER)
+    add_zenoh_options(
+        router,
+        connect="none, or the --zenoh-config file's",
+        listen=f"the --zenoh-config file's, else {DEFAULT_ROUTER}",
+        log="info",
+    )
     router.set_defaults(handler=cmd_router)
 
     _add_deploy(commands)

@@ -53,7 +53,7 @@ def cmd_bridge(args: argparse.Namespace) -> int:
         raise UsageError("--listen: a bridge never listens (it is a client of its router)")
     robot = dataclasses.replace(config.robot, zenoh=zenoh_settings(args, config.robot.zenoh))
     config = dataclasses.replace(config, robot=robot)
-    setup_logging()
+    setup_logging(args)
     try:
         return run_bridge(config)
     except BusUnavailable as err:  # like an unreachable router: worth retrying

@@ -109,7 +109,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     settings = None
     if args.replay is None:
         settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
-    setup_logging()
+    setup_logging(args)
     try:
         display = Display.open(
             team=None if keys is None else keys.team,
@@ -153,7 +153,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         raise UsageError(f"--duration: expected (0, 604800] s, got {args.duration:g}")
     geometry = _geometry(args.scenario)
     settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
-    setup_logging()
+    setup_logging(args)
     stop = stop_on_signals()
     recording = TeamRecording.open(output, keys.team, geometry, settings)
     LOG.info("recording team %r to %s", keys.team, output)

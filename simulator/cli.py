@@ -381,6 +381,7 @@ def _watch(args: argparse.Namespace, scenario: Scenario, stop: threading.Event) 
     except ValueError as err:
         raise UsageError(f"--team: {err}") from None
     settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
+    setup_logging(args)
 
     def report(time_s: float, phases: str) -> None:
         if not args.quiet:
@@ -718,7 +719,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         raise UsageError(f"{source}: {err}") from None
     settings = zenoh_settings(args, base)
     link = _can_link(args)
-    setup_logging()
+    setup_logging(args)
     try:
         return run_plant(
             scenario,

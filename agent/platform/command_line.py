@@ -11,8 +11,11 @@ takes the same three options, added by :func:`add_zenoh_options` and read back b
 - ``--connect ENDPOINT`` (repeatable): the routers (or peers) to connect to,
 - ``--listen ENDPOINT`` (repeatable): where to accept connections,
 - ``--zenoh-config FILE``: a Zenoh JSON5 config file (e.g. TLS, access control) to start from;
-  the project's settings are applied on top of it (mode, these endpoints, multicast scouting
-  off, shared memory off, lease),
+  its endpoints are used where it gives them and the two options above do not, and the
+  project's settings are applied on top of it (mode, multicast scouting off, shared memory
+  off, lease),
+- ``--zenoh-log LEVEL``: how much of Zenoh's own log joins the process's (else ``RUST_LOG``,
+  else the command's default; :mod:`agent.platform.zenoh_log`),
 
 and the mutual-TLS ones, all three or none (see :mod:`agent.security.certificates`):
 ``--tls-root-ca FILE``, ``--tls-certificate FILE``, ``--tls-private-key FILE``, and
@@ -33,8 +36,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+from agent.platform import zenoh_log
 from agent.platform.config import ConfigError
-from agent.platform.zenoh_session import ZenohSettings, zenoh_config
+from agent.platform.zenoh_session import ZenohSettings, file_endpoints, zenoh_config
 
 PROG = "heft"
 DEVICE_FOLDERS = ("/dev/", "/proc/")
@@ -162,20 +166,32 @@ def _fsync_folder(folder: Path) -> None:
 
 
 # ------------------------------------------------------------------------------ logging
-def setup_logging() -> None:
-    """Log INFO and above to stderr, one timestamped line each (what a process command logs)."""
+def setup_logging(args: argparse.Namespace | None = None) -> None:
+    """Log INFO and above to stderr, one timestamped line each (what a process command logs),
+    and Zenoh's own log with it from the process's first session on, at the level of
+    ``args``' ``--zenoh-log`` (:func:`add_zenoh_options`), else ``RUST_LOG``, else the
+    command's default (:mod:`agent.platform.zenoh_log`)."""
     logging.basicConfig(
         level=logging.INFO, format=LOG_FORMAT, datefmt="%H:%M:%S", stream=sys.stderr
+    )
+    zenoh_log.request(
+        getattr(args, "zenoh_log", None),
+        getattr(args, "zenoh_log_default", zenoh_log.DEFAULT_LEVEL),
     )
 
 
 # ------------------------------------------------------------------------------ Zenoh options
 def add_zenoh_options(
-    parser: argparse.ArgumentParser, connect: str, listen: str, config: str = "none"
+    parser: argparse.ArgumentParser,
+    connect: str,
+    listen: str,
+    config: str = "none",
+    log: str = zenoh_log.DEFAULT_LEVEL,
 ) -> None:
-    """Add ``--connect``, ``--listen``, ``--zenoh-config``, the ``--tls-...`` options and
-    ``--allow-plain`` to ``parser`` as the group "Zenoh"; ``connect``, ``listen`` and
-    ``config`` say, for the help, what is used without them."""
+    """Add ``--connect``, ``--listen``, ``--zenoh-config``, ``--zenoh-log``, the ``--tls-...``
+    options and ``--allow-plain`` to ``parser`` as the group "Zenoh"; ``connect``, ``listen``
+    and ``config`` say, for the help, what is used without them, ``log`` is the level of
+    Zenoh's log without ``--zenoh-log`` or ``RUST_LOG``."""
     group = parser.add_argument_group(
         "Zenoh",
         "Multicast scouting is always off: every endpoint is explicit, like\n"
@@ -198,10 +214,19 @@ def add_zenoh_options(
     group.add_argument(
         "--zenoh-config",
         metavar="FILE",
-        help="start from this Zenoh JSON5 config file (e.g. TLS, access control); the mode,"
-        " endpoints, scouting, shared memory and lease are still set as above"
-        f" (default: {config})",
+        help="start from this Zenoh JSON5 config file (e.g. TLS, access control); its"
+        " endpoints are used unless --connect/--listen give them; the mode, scouting,"
+        f" shared memory and lease are still set as above (default: {config})",
     )
+    group.add_argument(
+        "--zenoh-log",
+        choices=zenoh_log.LEVELS,
+        metavar="LEVEL",
+        help="how much of Zenoh's own log joins this process's log: off, error, warn, info,"
+        " debug or trace (default: the RUST_LOG environment variable, in Zenoh's filter"
+        f" syntax, if set, else {log})",
+    )
+    parser.set_defaults(zenoh_log_default=log)
     for option, what in TLS_OPTIONS.items():
         group.add_argument(
             option,
@@ -263,14 +288,49 @@ def zenoh_settings(args: argparse.Namespace, base: ZenohSettings) -> ZenohSettin
                 if getattr(base, key) is None:
                     names.setdefault(key, option)
         settings = dataclasses.replace(base, **changes)
+        if settings.config_file is not None:
+            settings = _with_file_endpoints(settings, args, names, plain_ok)
         settings.validate("zenoh", names)
         settings.check_private_key(names.get("private_key", "zenoh.private_key"))
     except ConfigError as err:
         raise UsageError(str(err)) from None
     if settings.config_file is not None:
-        where = "--zenoh-config" if args.zenoh_config is not None else "zenoh.config_file"
-        _check_zenoh_file(settings, where)
+        _check_zenoh_file(settings, _file_option(args))
     return settings
+
+
+def _file_option(args: argparse.Namespace) -> str:
+    """What gave the Zenoh config file, for an error message."""
+    return "--zenoh-config" if args.zenoh_config is not None else "zenoh.config_file"
+
+
+def _with_file_endpoints(
+    settings: ZenohSettings, args: argparse.Namespace, names: dict[str, str], plain_ok: bool
+) -> ZenohSettings:
+    """``settings`` with the endpoints its Zenoh config file gives (:func:`file_endpoints`)
+    where no ``--connect``/``--listen`` gave them, each checked as those are; ``names`` then
+    names the file's key for the error messages."""
+    import zenoh
+
+    path = settings.config_file
+    try:
+        given = file_endpoints(path, settings.mode)
+    except zenoh.ZError as err:
+        raise UsageError(
+            f"{_file_option(args)}: {path}: not a valid Zenoh config ({_one_line(err)})"
+        ) from None
+    changes = {}
+    for key, endpoints in given.items():
+        if key in names:  # --connect/--listen
+            continue
+        where = f"{path}: {key}/endpoints"
+        for endpoint in endpoints:
+            ZenohSettings.check_endpoint(endpoint, where)
+            if not plain_ok:
+                ZenohSettings.check_plain(endpoint, where, "give --allow-plain")
+        changes[key] = endpoints
+        names[key] = where
+    return dataclasses.replace(settings, **changes)
 
 
 def _check_zenoh_file(settings: ZenohSettings, where: str) -> None:

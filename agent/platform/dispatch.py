@@ -23,6 +23,7 @@ import sys
 from collections.abc import Sequence
 from importlib import metadata
 
+from agent.platform import zenoh_log
 from agent.platform.command_line import PROG, HelpFormatter, UsageError
 from agent.platform.config import ConfigError
 from agent.platform.zenoh_session import SessionError
@@ -85,7 +86,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``heft``; returns the exit status."""
+    """Entry point of ``heft``; returns the exit status. Run as the process's program (no
+    ``argv``: its command line), its commands route Zenoh's log into its log
+    (:func:`agent.platform.zenoh_log.enable`); called with ``argv`` (a test), they leave it
+    alone."""
+    if argv is None:
+        zenoh_log.enable()
     parser = build_parser()
     args = parser.parse_args(argv)
     handler = getattr(args, "handler", None)

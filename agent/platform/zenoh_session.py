@@ -9,6 +9,11 @@ Off a single host, sessions go over mutual TLS: ``root_ca``, ``certificate`` and
 ``private_key`` (made by :mod:`agent.security.certificates`) and ``tls/HOST:PORT`` endpoints; the
 router's access control (:mod:`agent.security.access_control`) then knows each process by its
 certificate. Plain ``tcp``/``udp`` to anything but loopback is refused unless ``allow_plain``.
+
+Each session says in the log what its final config puts in force (:func:`describe`): its
+endpoints and whether each is TLS or plain, mutual TLS, access control, multicast scouting and
+how much of Zenoh's own log the process routes into its log (:mod:`agent.platform.zenoh_log`,
+turned on here, at the process's first session).
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
+from agent.platform import zenoh_log
 from agent.platform.config import ConfigError, bounded, check_bounds
 from agent.platform.process import in_user_mode_linux
 
@@ -37,7 +43,6 @@ PLAIN = ("tcp", "udp")
 """Link protocols without encryption or authentication."""
 TLS_FILES = ("root_ca", "certificate", "private_key")
 """The ``[zenoh]`` keys of mutual TLS: given all three, or none."""
-PLAIN_WARNING = "plain tcp (no TLS, no access control): for loopback runs only"
 log = logging.getLogger("heft.zenoh")
 
 
@@ -62,7 +67,10 @@ class ZenohSettings:
     :func:`open_session` fails with one line naming the endpoints."""
     config_file: str | None = None
     """A Zenoh JSON5 config file to start from (TLS, access control, ...); the settings above
-    are applied on top of it, so its mode, endpoints, scouting and lease are never used."""
+    are applied on top of it, so its mode, scouting and lease are never used. Its endpoints
+    are, where it gives them, on the command line (:func:`file_endpoints`,
+    :func:`agent.platform.command_line.zenoh_settings`): ``--connect`` and ``--listen``
+    replace them, and they replace ``connect`` and ``listen``."""
     root_ca: str | None = None
     """Mutual TLS: the team's CA certificate (PEM), which every certificate shown to this
     process must be signed by (``transport/link/tls/root_ca_certificate``). ``root_ca``,
@@ -257,12 +265,86 @@ def tls_keys(settings: ZenohSettings) -> dict[str, object]:
     return keys
 
 
-def uses_plain_links(settings: ZenohSettings) -> bool:
-    """Whether any of the settings' endpoints is unencrypted (``tcp``, ``udp``)."""
-    return any(map(ZenohSettings.is_plain, (*settings.connect, *settings.listen)))
+def file_endpoints(path: str, mode: str) -> dict[str, tuple[str, ...]]:
+    """The endpoints the Zenoh config file ``path`` gives a session of ``mode``: ``connect``
+    and ``listen``, each only if the file gives some (a list, or a list for ``mode`` in a
+    table by mode; not Zenoh's default, which a file without the key has). ``zenoh.ZError``
+    if the file is not a valid Zenoh config."""
+    import zenoh
+
+    given, default = zenoh.Config.from_file(path), zenoh.Config()
+    endpoints: dict[str, tuple[str, ...]] = {}
+    for key in ("connect", "listen"):
+        value = json.loads(given.get_json(f"{key}/endpoints"))
+        if value == json.loads(default.get_json(f"{key}/endpoints")):
+            continue
+        if isinstance(value, dict):
+            value = value.get(mode) or []
+        if value:
+            endpoints[key] = tuple(str(endpoint) for endpoint in value)
+    return endpoints
 
 
-_warned_plain = False
+def describe(config) -> str:
+    """What the final Zenoh ``config`` of a session puts in force, as one line for the log:
+    its mode and endpoints, plain links, TLS (whether client certificates are required: mutual
+    TLS), access control (and its default permission), multicast scouting, and how much of
+    Zenoh's own log this process routes (:func:`agent.platform.zenoh_log.in_force`), e.g.
+
+    ``zenoh router: listen tls/192.168.10.1:7447; mutual TLS: clients must show a certificate
+    signed by /etc/heft/tls/ca.pem; access control on: default deny, 7 subjects; multicast
+    scouting off; zenoh log warn,zenoh=info (--zenoh-log info)``."""
+
+    def get(key: str):
+        return json.loads(config.get_json(key))
+
+    mode = get("mode") or "peer"
+    parts: list[str] = []
+    endpoints: dict[str, list[str]] = {}
+    for key in ("listen", "connect"):
+        value = get(f"{key}/endpoints")
+        if isinstance(value, dict):
+            value = value.get(mode) or []
+        endpoints[key] = [str(endpoint) for endpoint in value]
+        if value:
+            parts.append(f"{key} {', '.join(endpoints[key])}")
+    every = endpoints["listen"] + endpoints["connect"]
+    plain = [endpoint for endpoint in every if ZenohSettings.is_plain(endpoint)]
+    if plain:
+        protocols = "/".join(sorted({endpoint.split("/", 1)[0] for endpoint in plain}))
+        where = "for loopback runs only"
+        if not all(map(ZenohSettings.is_loopback, plain)):
+            where = "anyone on the network can join"
+        parts.append(f"plain {protocols}: no TLS, no certificates ({where})")
+    tls = get("transport/link/tls") or {}
+    if any(map(ZenohSettings.is_tls, endpoints["listen"])):
+        if tls.get("enable_mtls"):
+            parts.append(
+                "mutual TLS: clients must show a certificate signed by"
+                f" {tls.get('root_ca_certificate') or 'the system roots'}"
+            )
+        else:
+            parts.append("TLS without client certificates: anyone can connect")
+    if any(map(ZenohSettings.is_tls, endpoints["connect"])):
+        shown = tls.get("connect_certificate")
+        trusts = tls.get("root_ca_certificate") or "the system roots"
+        if shown and tls.get("enable_mtls"):
+            parts.append(f"mutual TLS: shows {shown}, trusts {trusts}")
+        else:
+            parts.append(f"TLS without a certificate of its own, trusts {trusts}")
+    acl = get("access_control") or {}
+    if acl.get("enabled"):
+        subjects = len(acl.get("subjects") or [])
+        parts.append(
+            f"access control on: default {acl.get('default_permission')}, {subjects} subjects"
+        )
+    else:
+        parts.append("access control off")
+    parts.append(f"multicast scouting {'on' if get('scouting/multicast/enabled') else 'off'}")
+    logged = zenoh_log.in_force()
+    if logged is not None:
+        parts.append(f"zenoh log {logged}")
+    return f"zenoh {mode}: " + "; ".join(parts)
 
 
 class SessionError(ConfigError):
@@ -273,21 +355,22 @@ class SessionError(ConfigError):
 
 
 def open_session(settings: ZenohSettings):
-    """Open a Zenoh session; close it with ``session.close()`` (or use it in ``with``). The
-    first session of a process on plain links says so in the log (:data:`PLAIN_WARNING`).
-    :class:`SessionError` if Zenoh cannot (it raises ``zenoh.ZError``: a busy or unusable
-    port, no router within ``connect_timeout_ms``)."""
+    """Open a Zenoh session; close it with ``session.close()`` (or use it in ``with``). Once
+    open, it says in the log what is in force (:func:`describe`). The first session of a
+    process that asked for Zenoh's log (:func:`agent.platform.zenoh_log.request`) turns it on
+    first. :class:`SessionError` if Zenoh cannot (it raises ``zenoh.ZError``: a busy or
+    unusable port, no router within ``connect_timeout_ms``)."""
     import zenoh
 
-    global _warned_plain
     settings.check_private_key("zenoh.private_key")
+    zenoh_log.start()
+    config = zenoh_config(settings)
+    in_force = describe(config)
     try:
-        session = zenoh.open(zenoh_config(settings))
+        session = zenoh.open(config)
     except zenoh.ZError as err:
         raise SessionError(session_error(str(err), settings)) from None
-    if not _warned_plain and uses_plain_links(settings):
-        _warned_plain = True  # once per process
-        log.info(PLAIN_WARNING)
+    log.info("%s", in_force)
     return session
 
 

@@ -344,8 +344,8 @@ def router_config_text(
         "Made by (do not edit; make it again):",
         f"  {command_line(team, robots, edges, listen, certs)}",
         f"The router reads {posixpath.join(certs, '{ca,router,router-key}.pem')}",
-        "(heft deploy certs). Run it with:",
-        f"  heft router --zenoh-config FILE {' '.join(f'--listen {e}' for e in listen)}",
+        "(heft deploy certs). Run it with (either listens on its listen endpoints):",
+        "  heft router --zenoh-config FILE",
         "or with zenohd --config FILE.",
     ]
     lines = [f"// {line}".rstrip() for line in header]

@@ -18,11 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform import zenoh_session
 from agent.platform.children import free_port
 from agent.platform.protocol import Control, Keys, encode
 from agent.platform.zenoh_session import (
-    PLAIN_WARNING,
     SessionError,
     ZenohSettings,
     open_session,
@@ -257,22 +255,28 @@ def test_a_client_without_the_teams_certificate_cannot_connect(
 
 
 @pytest.mark.slow
-def test_plain_sessions_are_logged_once(caplog, monkeypatch) -> None:
-    monkeypatch.setattr(zenoh_session, "_warned_plain", False)
-    settings = ZenohSettings(mode="peer", connect=(), listen=(f"tcp/127.0.0.1:{free_port()}",))
+def test_each_session_says_it_is_on_plain_links(caplog) -> None:
+    ports = [free_port(), free_port()]
     with caplog.at_level(logging.INFO, logger="heft.zenoh"):
-        with open_session(settings):
-            pass
-        with open_session(dataclasses.replace(settings, listen=(f"tcp/127.0.0.1:{free_port()}",))):
-            pass
-    assert [r.getMessage() for r in caplog.records if r.name == "heft.zenoh"] == [PLAIN_WARNING]
+        for port in ports:
+            settings = ZenohSettings(mode="peer", connect=(), listen=(f"tcp/127.0.0.1:{port}",))
+            with open_session(settings):
+                pass
+    assert [r.getMessage() for r in caplog.records if r.name == "heft.zenoh"] == [
+        f"zenoh peer: listen tcp/127.0.0.1:{port}; plain tcp: no TLS, no certificates (for"
+        " loopback runs only); access control off; multicast scouting off"
+        for port in ports
+    ]
 
 
 @pytest.mark.slow
-def test_tls_sessions_are_not_logged_as_plain(network: Network, caplog, monkeypatch) -> None:
-    monkeypatch.setattr(zenoh_session, "_warned_plain", False)
+def test_a_tls_session_says_which_certificate_it_shows(network: Network, certs, caplog) -> None:
     with caplog.at_level(logging.INFO, logger="heft.zenoh"):
         with open_session(network.settings("dashboard")):
             pass
-    assert [r for r in caplog.records if r.name == "heft.zenoh"] == []
+    [line] = [r.getMessage() for r in caplog.records if r.name == "heft.zenoh"]
+    assert line == (
+        f"zenoh client: connect {network.endpoint}; mutual TLS: shows {certs}/dashboard.pem,"
+        f" trusts {certs}/ca.pem; access control off; multicast scouting off"
+    )
     assert not any("PRIVATE KEY" in r.getMessage() for r in caplog.records)

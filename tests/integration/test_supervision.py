@@ -12,6 +12,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -22,7 +23,7 @@ from agent.platform.dispatch import main
 from simulator import launcher
 from simulator.scenario import load_scenario
 from tests.helpers.accuracy import worst_errors
-from tests.helpers.paths import PAPER
+from tests.helpers.paths import PAPER, ROOT
 from tests.helpers.processes import agent_pid, child_pid, children_of, in_session, launch
 
 pytestmark = pytest.mark.slow  # Zenoh sessions and processes
@@ -304,3 +305,31 @@ def test_a_slow_start_is_not_a_stall(monkeypatch) -> None:
     outcome = launcher.run_zenoh(load_scenario(PAPER), log_stream=io.StringIO())
     assert outcome.converged, outcome.detail
     assert worst_errors(outcome)["mass"] < 1e-4
+
+
+# ------------------------------------------------------------------------------ stopping
+SIGNAL_TO_ANOTHER_THREAD = """
+import os, signal, threading
+from agent.platform.process import stop_on_signals
+
+stop = stop_on_signals()
+threading.Thread(target=threading.Event().wait, args=(60,), daemon=True).start()
+signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})  # only that thread can take it
+os.kill(os.getpid(), signal.SIGTERM)
+stop.wait()
+print("stopped")
+"""
+
+
+def test_a_stop_signal_taken_by_another_thread_still_stops_the_wait() -> None:
+    """The kernel hands SIGTERM to a thread other than the main one (as it may to Zenoh's or
+    the log relay's): the main thread's ``stop.wait()`` still returns (with a plain
+    ``threading.Event`` it waits for ever)."""
+    done = subprocess.run(
+        [sys.executable, "-c", SIGNAL_TO_ANOTHER_THREAD],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=20,
+    )
+    assert (done.returncode, done.stdout) == (0, "stopped\n"), done.stderr

@@ -31,7 +31,7 @@ import pytest
 
 from agent.node import load_agent_config
 from agent.platform.dispatch import build_parser
-from agent.platform.zenoh_session import TLS_FILES
+from agent.platform.zenoh_session import TLS_FILES, file_endpoints
 from tests.helpers.paths import ROOT
 from tests.helpers.tls import TLS_DIR, loadable_copy
 
@@ -358,9 +358,12 @@ def test_agent_and_bridge_run_as_the_user_their_key_is_readable_by() -> None:
 def test_the_router_unit_listens_where_its_config_and_the_robots_say() -> None:
     argv = exec_argv(DEPLOY / "systemd" / "heft-router.service")
     config = router_json5()
-    # heft router sets its own listen endpoint over the file's: the unit must repeat it
+    # heft router listens on the file's endpoints (agent.platform.command_line.zenoh_settings)
     assert option(argv, "--zenoh-config") == ["/etc/heft/router.json5"]
-    assert option(argv, "--listen") == config["listen"]["endpoints"]
+    assert option(argv, "--listen") == []
+    assert file_endpoints(str(ROUTER_JSON5), "router") == {
+        "listen": tuple(config["listen"]["endpoints"])
+    }
     assert config["transport"]["link"]["tls"]["root_ca_certificate"] == f"{TLS_DIR}/ca.pem"
     endpoints = set(config["listen"]["endpoints"])
     for i, path in ROBOTS.items():

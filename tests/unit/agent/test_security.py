@@ -20,7 +20,7 @@ from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_set
 from agent.platform.config import ConfigError
 from agent.platform.dispatch import main
 from agent.platform.protocol import Keys
-from agent.platform.zenoh_session import ZenohSettings, zenoh_config
+from agent.platform.zenoh_session import ZenohSettings, describe, zenoh_config
 from agent.security.access_control import (
     AccessError,
     access_control,
@@ -387,3 +387,17 @@ def test_parse_edges() -> None:
     assert parse_edges(["1-2", " 3-2 "], 3) == ((1, 2), (2, 3))
     with pytest.raises(AccessError, match="a robot is not its own neighbour"):
         parse_edges(["1-1"], 2)
+
+
+def test_the_secured_routers_config_says_tls_and_access_control(certs, tmp_path) -> None:
+    """What a secured router has in force, read back from its final config."""
+    path = tmp_path / "router.json5"
+    path.write_text(router_config_text("sec", 4, LINE, ["tls/127.0.0.1:7447"], str(certs)), "utf-8")
+    router = ZenohSettings(
+        mode="router", connect=(), listen=("tls/127.0.0.1:7447",), config_file=str(path)
+    )
+    assert describe(zenoh_config(router)) == (
+        "zenoh router: listen tls/127.0.0.1:7447; mutual TLS: clients must show a certificate"
+        f" signed by {certs}/ca.pem; access control on: default deny, 7 subjects;"
+        " multicast scouting off"
+    )

@@ -12,7 +12,7 @@ import pytest
 from simulator.inprocess import run_inprocess
 from simulator.plots import _com_rows, plot_com_observer, write_plots
 from simulator.scenario import load_scenario
-from tests.conftest import PAPER
+from tests.helpers.paths import PAPER
 
 
 @pytest.fixture(scope="module")

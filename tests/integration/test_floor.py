@@ -18,7 +18,7 @@ from simulator.launcher import run_zenoh
 from simulator.plant import Plant
 from simulator.results import floor_check, format_table
 from simulator.scenario import load_scenario
-from tests.conftest import PAPER
+from tests.helpers.paths import PAPER
 
 
 @pytest.fixture(scope="module")
