@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from agent.platform.protocol import BridgeStatus
+from bridge.bench.can import FORCE_STEP, tick_of, tick_values
 from bridge.bridge import CAN_ERR_BUSOFF
 from bridge.codec import (
     AgvCodec,
@@ -152,13 +153,21 @@ def test_lockstep_over_can_reproduces_the_inprocess_can_run(tmp_path: Path) -> N
 
 
 # ------------------------------------------------------------------------------ one bridge
+def forwarded(frames: list) -> list[int]:
+    """The ticks named by the agent's commands among the bridge's ``(timestamp, frame)``
+    (not the watchdog's zero force), in the order they went out on the bus."""
+    return [tick_of(f.force, FORCE_STEP) for _, f in frames if f.apply]
+
+
 class Rig:
     """A :class:`~bridge.devtools.rig.BridgeRig` on :data:`RIG_CHANNEL` (router, ``heft bridge``
     with a 100 ms watchdog under ``SCHED_FIFO``, as on a robot, and the echo agent), and here AGV
     node 1's driver: a tick every 10 ms (Sync, Odometry, AppliedForce), a heartbeat every
     100 ms; and a reader of the bridge's ``ForceCommand`` frames (a kernel filter keeps the
-    rest out of its socket) with their kernel timestamps. :attr:`sent` counts every frame
-    sent from here."""
+    rest out of its socket) with their kernel timestamps. Tick ``k``'s applied force carries
+    ``k`` (:func:`~bridge.bench.can.tick_values`), so the echo agent's command for it, and
+    the frame the bridge writes for that, name the tick (:func:`forwarded`). :attr:`sent`
+    counts every frame sent from here."""
 
     def __init__(self, folder: Path) -> None:
         self.rig = BridgeRig(
@@ -166,6 +175,7 @@ class Rig:
         )
         self.rig.start()
         self.tick = 0
+        self.beats = 0
         self.sent = 0
         """Frames the driver has sent."""
         self.frames: list = []  # (kernel timestamp, frame) of the bridge's frames
@@ -207,19 +217,17 @@ class Rig:
 
     def _drive(self) -> None:
         due = time.monotonic()
-        beats = 0
         while not self.stop.is_set():
             with self.ticking:  # a pause waits for the tick being sent
                 paused = self.paused.is_set()
                 if not paused:
                     k = self.tick
                     frames = [Sync(k), Odometry(1, k % 16, (0.1, 0.2))]
-                    frames.append(AppliedForce(1, k % 16, (3, 4)))
-                    if k % 10 == 0:
-                        frames.append(Heartbeat(1, beats % 16, 2))
-                        beats += 1
+                    frames.append(AppliedForce(1, k % 16, tick_values(k, FORCE_STEP)))
                     for frame in frames:
                         self.send(CODEC.encode(frame))
+                    if k % 10 == 0:
+                        self._heartbeat()
                     self.tick = k + 1
             if paused:
                 time.sleep(PERIOD)
@@ -253,13 +261,38 @@ class Rig:
     def wait(self, condition, timeout: float, what: str) -> BridgeStatus:
         return self.rig.wait_status(condition, timeout, what)
 
-    def settled(self, frames_in: int = 1 << 62) -> BridgeStatus:
-        """With the driver paused: the bridge's status once it has read ``frames_in`` frames,
-        or once its count stopped growing."""
+    def _heartbeat(self) -> None:
+        self.send(CODEC.encode(Heartbeat(1, self.beats % 16, 2)))
+        self.beats += 1
+
+    def drained(self, since: tuple[BridgeStatus, int] | None = None) -> BridgeStatus:
+        """Pause the driver; the bridge's status once it has read every frame sent (with
+        ``since = (status, sent)``: the status's ``frames_in`` plus the frames sent since
+        :attr:`sent` was ``sent``; without it, the count once it stopped growing) and
+        handled the agent's command for every tick sent: the bus's newest tick is the last
+        one, so that tick's command cannot be too old and goes out, after every earlier one
+        (the agent answers in order). A heartbeat sent after it dates the status: one that
+        counts it was published after all that, with every command refused so far counted."""
         self.paused.set()
         with self.ticking:
-            pass
-        return self.rig.settled_status(frames_in, timeout_s=60.0)
+            last = self.tick - 1
+            if since is not None:
+                frames_in = since[0].frames_in + self.sent - since[1]
+        deadline, read = time.monotonic() + 60.0, 0
+        while True:
+            frames = self.frames[read:]
+            read += len(frames)
+            if last in forwarded(frames):
+                break
+            self.rig.check()
+            if time.monotonic() > deadline:
+                raise AssertionError(f"the command for tick {last} did not come within 60 s")
+            time.sleep(0.02)
+        if since is None:
+            frames_in = self.rig.settled_status(1 << 62, timeout_s=60.0).frames_in
+        with self.ticking:
+            self._heartbeat()
+        return self.wait(lambda s: s.frames_in > frames_in, 60, "the bridge reads a heartbeat")
 
     def close(self) -> None:
         self.stop.set()
@@ -320,15 +353,31 @@ def test_the_watchdog_commands_zero_force_when_the_agent_is_killed(rig: Rig) -> 
 def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(rig: Rig) -> None:
     """2 000 frames the protocol refuses (random ids, lengths, payloads, error and remote
     frames), in bursts of 100 as fast as this process sends them, between the driver's
-    ticks: the bridge reads every frame, counts every refused one, misses no tick, and
-    answers ticks all along. (100 000 such frames, counted reason by reason, are in
-    tests/unit/bridge/test_bridge.py, on a virtual bus: User-Mode Linux took 11.7 s for these
-    2 000.)"""
+    ticks: the bridge reads every frame, counts every refused one, misses no tick, and the
+    agent's commands keep coming back on the bus. (100 000 such frames, counted reason by
+    reason, are in tests/unit/bridge/test_bridge.py, on a virtual bus: User-Mode Linux took
+    11.7 s for these 2 000.)
+
+    What "the ticks still flow" can mean: each tick's command goes out on the bus, naming
+    its tick, or is refused as too old (it came back after the bus had opened 16 later
+    ticks, so its 4-bit counter would name another), and counted; none is lost, repeated
+    or sent out of order. Not a frame per tick: in the guest's one CPU the flood's sender
+    competes with the router and the echo agent for the CPU the bridge leaves them, so
+    their round trip at times exceeds 15 ticks (this test prints how many commands were
+    refused) while the bridge itself keeps up (it reads every frame), and a tick whose
+    command is refused before the watchdog's 100 ms ran out has no frame of its own: the
+    driver keeps the force it was last given, as the watchdog allows
+    (tests/unit/bridge/test_bridge.py,
+    ``test_a_command_back_too_late_to_name_its_tick_is_refused_and_the_watchdog_covers_it``).
+    The status before and after is read with the driver paused once every command is
+    back (:meth:`Rig.drained`); a paused driver means no measurement to answer, so the
+    watchdog holds there (``watchdog=True``), as it should."""
     junk, _ = random_frames(2_000, seed=9, codec=CODEC)
     errors = sum(1 for m in junk if m.is_error_frame)
     bus_off = sum(1 for m in junk if m.is_error_frame and m.arbitration_id & CAN_ERR_BUSOFF)
     rig.wait(lambda s: not s.watchdog, 30, "the watchdog is clear")
-    before, sent_before, ticks_before = rig.settled(), rig.sent, rig.tick
+    before = rig.drained()
+    sent_before, first = rig.sent, rig.tick
     rig.frames.clear()
     rig.paused.clear()
     started = time.perf_counter()
@@ -336,23 +385,28 @@ def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(ri
         for message in junk[burst : burst + 100]:
             rig.send(message)
         time.sleep(5 * PERIOD)
-    rig.paused.set()
-    with rig.ticking:  # no tick goes out from here: every frame sent is counted
-        sent = rig.sent
-    after = rig.settled(before.frames_in + sent - sent_before)
+    after = rig.drained(since=(before, sent_before))
     wall = time.perf_counter() - started
-    ticks = rig.tick - ticks_before
-    answered = {f.counter for _, f in rig.frames if f.apply}
+    sent = rig.sent - sent_before  # the last heartbeat included
+    ticks = range(first, rig.tick)
+    frames = list(rig.frames)
+    commands = forwarded(frames)
+    refused = after.rejected_commands - before.rejected_commands
     print(
-        f"\n{len(junk)} refused frames in {wall:.1f} s beside {ticks} ticks:"
+        f"\n{len(junk)} refused frames in {wall:.1f} s beside {len(ticks)} ticks:"
         f" {after.decode_errors - before.decode_errors} decode errors,"
-        f" {after.bus_errors - before.bus_errors} bus errors; {after}"
+        f" {after.bus_errors - before.bus_errors} bus errors; {len(commands)} commands"
+        f" forwarded, {refused} refused as too old, {sum(not f.apply for _, f in frames)}"
+        f" zero-force frames; {after}"
     )
     rig.paused.clear()
-    assert after.frames_in - before.frames_in == sent - sent_before  # junk included
+    assert after.frames_in - before.frames_in == sent  # junk included
     assert after.decode_errors - before.decode_errors == len(junk) - bus_off
     assert after.bus_errors - before.bus_errors == errors
     assert after.missed_ticks == before.missed_ticks
     assert after.counter_jumps == before.counter_jumps
-    assert after.frames_out - before.frames_out >= ticks
-    assert len(answered) == 16  # commands for ticks of every counter value came back
+    assert commands == sorted(set(commands)) and set(commands) <= set(ticks)
+    assert len(commands) + refused == len(ticks)  # each forwarded or refused, none lost
+    named = [(f.counter, tick_of(f.force, FORCE_STEP) % 16) for _, f in frames if f.apply]
+    assert all(counter == tick for counter, tick in named)
+    assert len({f.counter for _, f in frames if f.apply}) == 16  # commands flowed all along

@@ -202,6 +202,83 @@ def test_the_watchdog_commands_zero_force_then_clears_when_commands_return() -> 
     assert len(bridge.watchdog(1.34)) == 1 and bridge.status().watchdog_trips == 2
 
 
+def _late_agent_run(round_trip_s, ticks: int):
+    """The bridge's loop in simulated time: the bus opens tick ``k`` at ``k T`` (``Sync``,
+    then ``Odometry`` and ``AppliedForce`` 0.5 and 1 ms later, the force naming the tick),
+    the agent answers each measurement ``round_trip_s(k)`` seconds after it, in order (a
+    command never overtakes an earlier one), and stops after the last tick; the watchdog is
+    checked after every frame and command and at every :meth:`Bridge.next_check`, as
+    :class:`bridge.node.BridgeNode` does, until 1 s after the last tick. Returns the bridge,
+    when each tick's command reached it, and ``(time, frame)`` of every frame it wrote."""
+    bridge = make_bridge(watchdog_s=0.1)
+    frames = []
+    for k in range(ticks):
+        for i, frame in enumerate(tick_frames(k, f=(k * 0.25, -3.0))):
+            frames.append((k * PERIOD + i * 5e-4, frame))
+    end = (ticks - 1) * PERIOD + 1.0
+    commands: list[tuple[float, Command]] = []
+    arrived: dict[int, float] = {}
+    written: list[tuple[float, ForceCommand]] = []
+    now = 0.0
+
+    def wrote(out: list) -> None:
+        out = out + bridge.watchdog(now)
+        written.extend((now, CODEC.decode(m)) for m in out)
+
+    while True:
+        due = max(bridge.next_check(now), now + 1e-6)  # a real clock moves on
+        nxt = min([t for t, _ in frames[:1]] + [t for t, _ in commands[:1]], default=math.inf)
+        if due < nxt:
+            if due > end:
+                return bridge, arrived, written
+            now = due
+            wrote([])
+        elif commands and (not frames or commands[0][0] <= frames[0][0]):
+            now, command = commands.pop(0)
+            arrived[command.tick] = now
+            wrote(bridge.command(command, now))
+        else:
+            now, frame = frames.pop(0)
+            for m in feed(bridge, frame):
+                back = max([now + round_trip_s(m.tick)] + [t for t, _ in commands[-1:]])
+                commands.append((back, Command(2, m.tick, m.force)))
+            wrote([])
+
+
+def test_a_command_back_too_late_to_name_its_tick_is_refused_and_the_watchdog_covers_it() -> None:
+    """Why a bridge cannot promise a frame on every tick: the agent's command for tick ``k``
+    names it by ``k mod 16`` only while the bus has opened at most 15 later ticks, so one
+    that comes back later is refused and counted; and the watchdog commands zero force only
+    once no valid command came for ``watchdog_s``. A round trip that grows past 15 ticks (a
+    backlog on the agent's side: a flood on a loaded machine) leaves ticks without a frame:
+    the driver keeps the force it was last given, for at most the watchdog time. What the
+    bridge promises instead, checked here: every command is forwarded naming its tick, or
+    refused as too old, and counted, never lost; and the driver never goes longer than
+    ``watchdog_s`` without a ``ForceCommand``, up to the zero force after the agent's last
+    command."""
+    ticks = 300
+
+    def round_trip_s(k: int) -> float:  # 40 ms, a backlog up to 400 ms, then 40 ms again
+        return 0.04 + max(0.0, 0.36 - abs(k - 150) * 0.006)
+
+    bridge, arrived, written = _late_agent_run(round_trip_s, ticks)
+    assert sorted(arrived) == list(range(ticks))
+    # The bus's newest tick when a command arrived (none arrives on a tick's instant).
+    in_time = [k for k in range(ticks) if min(ticks - 1, int(arrived[k] / PERIOD)) - k <= 15]
+    assert 0 < len(in_time) < ticks
+    commands = [f for _, f in written if f.apply]
+    assert [(f.counter, f.force) for f in commands] == [(k % 16, (k * 0.25, -3.0)) for k in in_time]
+    assert bridge.rejects.reasons["command", "too old"] == ticks - len(in_time)
+    assert bridge.rejects.counts["command"] == ticks - len(in_time)
+    assert bridge.counts["measurements"] == ticks and bridge.counts["missed ticks"] == 0
+    # Fewer frames than ticks while the bus ticked: the count the HIL test may not expect.
+    assert len([t for t, _ in written if t <= arrived[ticks - 1]]) < ticks
+    times = [t for t, _ in written]
+    assert max(b - a for a, b in zip(times, times[1:])) <= 0.1 + 2e-4
+    assert times[-1] > arrived[ticks - 1] + 0.9  # zero force on to the end
+    assert not written[-1][1].apply and bridge.tripped
+
+
 def test_next_check_is_the_watchdogs_deadline() -> None:
     bridge = make_bridge(watchdog_s=0.1)
     feed(bridge, Sync(0))
