@@ -30,7 +30,7 @@ def worst_errors(outcome: RunOutcome) -> dict[str, float]:
 
 ESTIMATED = (
     "omega",
-    "spread",
+    "w",
     "moment",
     "mass",
     "centroid_offset",
