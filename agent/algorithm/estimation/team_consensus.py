@@ -71,6 +71,8 @@ class LoadFrame(Protocol):
         ...
 
 
+_NUMBER, _VECTOR, _TURNING = 0, 1, 2
+
 Inputs = Callable[[Vec2], Sequence[float]]
 """A robot's inputs of the ``MEAN`` quantities (one number per component, declaration order),
 given its offsets iterate ``x_i``."""
@@ -105,6 +107,11 @@ class TeamConsensus:
         self._index = {q.name: i for i, q in enumerate(self.quantities)}
         self._slots = tuple(self._index[q.name] for q in self.flowing)
         """Where each flow-form quantity is in :attr:`state`."""
+        self._plan = tuple(
+            (slot, _NUMBER if q.shape == 1 else _TURNING if q.turns else _VECTOR)
+            for q, slot in zip(self.flowing, self._slots)
+        )
+        """How to read each flow-form quantity from a neighbour's state."""
         self._start = {q.name: start for q, start in zip(self.flowing, _starts(self.flowing))}
         """Where each flow-form quantity starts in :attr:`values` (and in a flow)."""
         self._shape = {q.name: q.shape for q in self.flowing}
@@ -186,24 +193,28 @@ class TeamConsensus:
         out = self._outflow()
         values = self._of(out, self.inputs((-out[0], -out[1])))
         previous = frame.instant - 1
-        width, slots = self._width, self._slots
+        width, plan = self._width, self._plan
         for j in self.neighbours:
             s = shares.get(j)
             if s is None:
                 continue
             a = metropolis_weight(self.degree, s.degree)
+            if s.instant == previous:  # usually one tick old: turned by this update's turn
+                c, sn = self._c, self._s
+            else:
+                since = frame.turned_since(s.instant)
+                c, sn = math.cos(since), math.sin(since)
             theirs = []
-            theirs_state = s.consensus
-            for q, slot in zip(self.flowing, slots):
-                value = theirs_state[slot]
-                if q.shape == 1:
+            state = s.consensus
+            for slot, kind in plan:
+                value = state[slot]
+                if kind == _NUMBER:
                     theirs.append(value)
-                elif not q.turns:
+                elif kind == _VECTOR:
                     theirs.extend(value)
-                elif s.instant == previous:  # usually one tick old: turned by this update's turn
-                    theirs.extend(self.turned(value))
-                else:
-                    theirs.extend(rotate(value, frame.turned_since(s.instant)))
+                else:  # a vector of the load, turned to this instant
+                    x, y = value
+                    theirs += (c * x - sn * y, sn * x + c * y)
             z = frame.relative_position(j) or (0.0, 0.0)
             delta = [a * (theirs[0] - values[0] + z[0]), a * (theirs[1] - values[1] + z[1])]
             delta += [a * (theirs[k] - values[k]) for k in range(2, width)]
