@@ -13,5 +13,6 @@ known), :mod:`dashboard.state` (pure aggregation of the messages into what the p
 web app), :mod:`dashboard.app` (the FastAPI app), :mod:`dashboard.server` (uvicorn in a
 thread), :mod:`dashboard.display` (the page and a recorder as parts of a process),
 :mod:`dashboard.companion` (both beside a run of ``heft run``/``heft demo``),
-:mod:`dashboard.cli` (``heft dashboard``, ``heft record``) and :mod:`dashboard.bench.streaming`.
+:mod:`dashboard.cli` (``heft dashboard``, ``heft record``); its benchmark, ``heft bench
+dashboard``, is :mod:`dashboard.bench`.
 """

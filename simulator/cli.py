@@ -2,10 +2,12 @@
 
     heft run SCENARIO [--transport inprocess|zenoh] [--out FILE] [--plot DIR] [--quiet]
     heft scenario generate SEED [-o FILE]
-    heft bench [SCENARIO] [--repeat N] [--transport zenoh] [--generated N]
     heft sim SCENARIO [--team NAME] [--clock lockstep|realtime] [Zenoh options]
     heft demo [--out FILE] [--plot DIR] [--quiet]
     heft baseline RECORDING [--velocity-noise S] [--force-noise S] [--out FILE]
+
+(Its benchmarks, ``heft bench accuracy|generated|zenoh|noise|sweep|changes``, are in
+:mod:`simulator.bench.cli`.)
 
 Exit status (the README's table): 0 success (``run``: every robot converged), 1 ``run`` did
 not converge (the last line and the results' ``reason`` say why), 2 bad input (a one-line
@@ -43,7 +45,13 @@ from agent.platform.command_line import (
 )
 from agent.platform.protocol import CLOCKS, Phase
 from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings
-from simulator.scenario import Scenario, ScenarioError, load_scenario, scenario_to_toml
+from simulator.scenario import (
+    PAPER_SCENARIO,
+    Scenario,
+    ScenarioError,
+    load_scenario,
+    scenario_to_toml,
+)
 
 if TYPE_CHECKING:
     from agent.algorithm.agent import Agent
@@ -55,7 +63,7 @@ PROGRESS_EVERY_S = 5.0
 """Simulated seconds between two progress lines of ``heft run``."""
 
 
-def _load(path: str) -> Scenario:
+def load_scenario_argument(path: str) -> Scenario:
     """The scenario at ``path``; a :class:`UsageError` naming the problem if it is invalid."""
     try:
         return load_scenario(path)
@@ -106,7 +114,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # processes and returns what it recorded; in one process the loop is interrupted where it
     # is (see _run). Either way the results are written.
     with _StopSignals() as stop:
-        scenario = _load(args.scenario)
+        scenario = load_scenario_argument(args.scenario)
         if args.transport is None:  # --can alone runs the processes, as on robots
             args.transport = "zenoh" if args.can else "inprocess"
         link = _can_link(args)
@@ -420,8 +428,6 @@ def _write_plots(outcome: RunOutcome, directory: Path) -> list[Path]:
 # ------------------------------------------------------------------------------ heft demo
 def cmd_demo(args: argparse.Namespace) -> int:
     """``heft demo``: ``heft run`` of the paper's scenario over Zenoh on the wall clock."""
-    from simulator.bench.accuracy import PAPER_SCENARIO
-
     args.scenario = str(PAPER_SCENARIO)
     args.transport = "zenoh"
     args.can = False
@@ -449,249 +455,6 @@ def cmd_generate(args: argparse.Namespace) -> int:
     return 0
 
 
-# ------------------------------------------------------------------------------ heft bench
-def cmd_bench(args: argparse.Namespace) -> int:
-    """``heft bench``: run a scenario several times and report accuracy and speed."""
-    from agent.platform.config import Bound
-    from simulator.bench.accuracy import (
-        DEFAULT_REPEAT,
-        PAPER_SCENARIO,
-        format_report,
-        run_benchmark,
-    )
-
-    if args.dashboard:
-        if args.can:
-            raise UsageError("--dashboard and --can are two benchmarks: run one at a time")
-        from dashboard.bench.streaming import main as bench_dashboard
-
-        return bench_dashboard([])  # 16 robots at 100 Hz, 3 browsers, then a 10x replay
-    if args.can:
-        return _bench_can(args)
-    if args.noise or args.sweep:
-        return _bench_noise(args)
-    for option in ("seeds", "first_seed", "plot"):
-        if getattr(args, option) is not None:
-            raise UsageError(f"--{option.replace('_', '-')} needs --noise")
-    if args.changes:
-        raise UsageError("--changes needs --noise")
-    if args.ideal_drives:
-        raise UsageError("--ideal-drives needs --noise")
-    for option in ("channel", "seconds", "period_ms"):
-        if getattr(args, option) is not None:
-            raise UsageError(f"--{option.replace('_', '-')} needs --can")
-    if args.repeat is not None:
-        Bound(1, 1000, "runs").check("--repeat", args.repeat)
-    if args.generated is not None:
-        Bound(1, 1000, "scenarios").check("--generated", args.generated)
-        return _bench_generated(args.generated)
-    if args.transport == "zenoh":
-        return _bench_zenoh(args.sizes)
-    repeat = DEFAULT_REPEAT if args.repeat is None else args.repeat
-    source = str(PAPER_SCENARIO) if args.scenario is None else args.scenario
-    scenario = _load(source)
-
-    def on_run(k: int, outcome: RunOutcome) -> None:
-        _say_run(f"run {k}/{repeat}", outcome)
-
-    report = run_benchmark(scenario, repeat, source=source, on_run=on_run)
-    print(format_report(report))
-    return 0
-
-
-def _say_run(label: str, outcome: RunOutcome) -> None:
-    """One progress line on stderr per benchmark run."""
-    state = "converged" if outcome.converged else "NOT converged"
-    print(
-        f"{PROG}: {label}: {state}, {outcome.sim_time_s:.2f} s simulated in"
-        f" {outcome.wall_s:.2f} s wall",
-        file=sys.stderr,
-        flush=True,
-    )
-
-
-def _bench_zenoh(sizes: str) -> int:
-    from simulator.bench.accuracy import format_zenoh_report, run_zenoh_benchmark
-
-    try:
-        counts = [int(s) for s in sizes.split(",")]
-    except ValueError:
-        raise UsageError(f"--sizes: expected numbers like 4,8,16, got {sizes!r}") from None
-    for n in counts:
-        if n < 3 or 32 % n:
-            raise UsageError(f"--sizes: a ring team needs n >= 3 dividing 32, got {n}")
-
-    print(format_zenoh_report(run_zenoh_benchmark(counts, _say_run)))
-    return 0
-
-
-def _bench_can(args: argparse.Namespace) -> int:
-    """``heft bench --can``: the AGV bridge's round trip, forwarding rate and CPU on vcan."""
-    from agent.platform.config import Bound, ConfigError
-    from bridge.bench.can import (
-        DEFAULT_CHANNEL,
-        BenchError,
-        CanBenchSettings,
-        format_can_report,
-        run_can_benchmark,
-        vcan_problem,
-    )
-    from bridge.config import CanSettings
-
-    given = [
-        name
-        for name, value in (
-            ("SCENARIO", args.scenario),
-            ("--repeat", args.repeat),
-            ("--generated", args.generated),
-            ("--transport zenoh", args.transport == "zenoh" or None),
-        )
-        if value is not None
-    ]
-    if given:
-        raise UsageError(f"--can: {given[0]} is not an option of the CAN bridge's benchmark")
-    channel = args.channel or DEFAULT_CHANNEL
-    try:
-        CanSettings(channel=channel).validate("--channel")
-    except ConfigError as err:
-        raise UsageError(str(err).replace("--channel.channel", "--channel")) from None
-    seconds = 20.0 if args.seconds is None else args.seconds
-    period_ms = 10.0 if args.period_ms is None else args.period_ms
-    Bound(1, 3600, "s").check("--seconds", seconds)
-    Bound(1, 100, "ms").check("--period-ms", period_ms)
-    problem = vcan_problem(channel)
-    if problem is not None:
-        raise UsageError(
-            f"bench --can needs the vcan interface {channel} ({problem}); run it as:"
-            " heft vcan -- heft bench --can"
-        )
-    settings = CanBenchSettings(channel=channel, seconds=seconds, period_s=period_ms / 1000)
-    try:
-        report = run_can_benchmark(settings)
-    except BenchError as err:
-        print(f"{PROG}: error: {err}", file=sys.stderr)
-        return 1
-    print(format_can_report(report))
-    return 0
-
-
-def _bench_noise(args: argparse.Namespace) -> int:
-    """``heft bench --noise``: the robust estimators, the paper's and the centralized fit on
-    the same noisy runs (``--sweep``: over σ_v, with a plot)."""
-    from agent.platform.config import Bound
-    from simulator.bench.accuracy import PAPER_SCENARIO
-    from simulator.bench.noise import (
-        GENERATED_INERTIA_BRAKE_S,
-        GENERATED_PUSH_DAMPING,
-        NoiseSettings,
-        format_noise_report,
-        format_sweep,
-        plot_sweep,
-        run_noise_bench,
-        run_sweep,
-        timed,
-    )
-    from simulator.generate import generate_scenario
-
-    if args.generated is not None:
-        Bound(1, 1000, "scenarios").check("--generated", args.generated)
-        seeds, label = args.generated, "generated scenarios"
-
-        def scenarios(seed: int):
-            return generate_scenario(seed)
-    else:
-        source = str(PAPER_SCENARIO) if args.scenario is None else args.scenario
-        scenario = _load(source)
-        seeds = 20 if args.seeds is None else args.seeds
-        label = f"scenario {scenario.name!r}"
-
-        def scenarios(seed: int):
-            return scenario
-
-    if args.seeds is not None:
-        Bound(1, 1000, "seeds").check("--seeds", args.seeds)
-        seeds = args.seeds
-    first = 0 if args.first_seed is None else args.first_seed
-    Bound(0, 100_000, "seeds").check("--first-seed", first)
-    if args.plot is not None and not args.sweep:
-        raise UsageError("--plot needs --sweep")
-    if args.changes:
-        if args.generated is not None or args.sweep:
-            raise UsageError(
-                "--changes runs the paper's scenario (or SCENARIO): no --generated or --sweep"
-            )
-        return _bench_changes(
-            scenario, dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first)
-        )
-
-    def on_seed(result) -> None:
-        state = "done" if result.robust_done else "NOT done"
-        print(
-            f"{PROG}: seed {result.seed}: robust {state} at {result.robust_time_s:.2f} s simulated",
-            file=sys.stderr,
-            flush=True,
-        )
-
-    settings = dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first)
-    if args.generated is not None:
-        settings = dataclasses.replace(
-            settings,
-            push_damping=GENERATED_PUSH_DAMPING,
-            inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
-        )
-    if args.ideal_drives:
-        settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
-    if args.sweep:
-        found = run_sweep(
-            scenarios,
-            settings,
-            lambda sigma, _: print(f"{PROG}: sigma_v {sigma:g} m/s done", file=sys.stderr),
-        )
-        print(format_sweep(found, label))
-        if args.plot is not None:
-            folder = Path(args.plot)
-            folder.mkdir(parents=True, exist_ok=True)
-            print(f"plot: {plot_sweep(found, folder / 'noise_sweep.png', label)}")
-        return 0
-    results, wall = timed(run_noise_bench, scenarios, settings, on_seed)
-    report = format_noise_report(results, settings, label, wall)
-    print(report)
-    return 0 if report.endswith(": met") else 1
-
-
-def _bench_changes(scenario, settings) -> int:
-    """``heft bench --noise --changes``: a changed mass, a moved COM and no change, per seed."""
-    from simulator.bench.changes import format_change_report, run_change_bench
-
-    def on_result(result) -> None:
-        noticed = "-" if result.latency_s is None else f"{result.latency_s:.2f} s"
-        print(
-            f"{PROG}: seed {result.seed} {result.case}: restart after {noticed},"
-            f" false alarms {result.false_alarms}",
-            file=sys.stderr,
-            flush=True,
-        )
-
-    results = run_change_bench(scenario, settings, on_result)
-    report = format_change_report(results)
-    print(report)
-    return 0 if report.endswith(": met") else 1
-
-
-def _bench_generated(count: int) -> int:
-    from simulator.bench.accuracy import format_generated, run_generated
-
-    if count < 1:
-        raise UsageError(f"--generated must be at least 1, got {count}")
-
-    def on_run(seed: int, outcome: RunOutcome) -> None:
-        _say_run(f"seed {seed}, {outcome.scenario.n} robots", outcome)
-
-    outcomes = run_generated(count, on_run)
-    print(format_generated(outcomes))
-    return 0 if all(o.converged for o in outcomes) else 1
-
-
 # ------------------------------------------------------------------------------ heft sim
 def cmd_sim(args: argparse.Namespace) -> int:
     """``heft sim``: the plant of a scenario as a process on Zenoh."""
@@ -704,7 +467,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from simulator.can_drivers import CanBusError
     from simulator.node import run_plant
 
-    scenario = _load(args.scenario)
+    scenario = load_scenario_argument(args.scenario)
     Bound(0, 3600, "s", open_low=True).check("--start-timeout", args.start_timeout)  # NaN too
     base = ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,))
     if args.connect_timeout_ms is not None:
@@ -772,12 +535,11 @@ def _add_can_options(parser: argparse.ArgumentParser, what: str) -> None:
 
 # ------------------------------------------------------------------------------ the parsers
 def register(commands: argparse._SubParsersAction) -> None:
-    """Add ``heft run``, ``watch``, ``scenario``, ``bench``, ``sim``, ``demo`` and ``baseline``
-    (entry point of the group ``heft.commands``)."""
+    """Add ``heft run``, ``watch``, ``scenario``, ``sim``, ``demo`` and ``baseline`` (entry
+    point of the group ``heft.commands``)."""
     _add_run(commands)
     _add_watch(commands)
     _add_scenario(commands)
-    _add_bench(commands)
     _add_sim(commands)
     _add_demo(commands)
     _add_baseline(commands)
@@ -964,129 +726,6 @@ def _add_scenario(commands: argparse._SubParsersAction) -> None:
         "-o", "--output", metavar="FILE", help="write to FILE (default: standard output)"
     )
     generate.set_defaults(handler=cmd_generate)
-
-
-def _add_bench(commands: argparse._SubParsersAction) -> None:
-    parser = commands.add_parser(
-        "bench",
-        help="accuracy, step durations and speed of repeated runs",
-        formatter_class=HelpFormatter,
-        description=(
-            "Run SCENARIO in this process N times and print the worst final errors (mass %,\n"
-            "J %, contact-to-COM and z_ij in mm), the simulated time each paper step took,\n"
-            "how many times faster than real time the runs went (median, min, max) and the\n"
-            "peak resident memory."
-        ),
-    )
-    parser.add_argument(
-        "scenario",
-        metavar="SCENARIO",
-        nargs="?",
-        help="scenario TOML file (default: the paper's, simulator/scenarios/paper.toml)",
-    )
-    parser.add_argument(
-        "-n",
-        "--repeat",
-        metavar="N",
-        type=int,
-        help="number of runs (default: 3), in [1, 1000]",
-    )
-    parser.add_argument(
-        "--transport",
-        choices=("inprocess", "zenoh"),
-        default="inprocess",
-        help="zenoh: instead, one process per robot: lockstep speed of ring teams (--sizes),"
-        " then the paper's scenario in real time: command latency p50/p99, CPU per agent",
-    )
-    parser.add_argument(
-        "--sizes",
-        default="4,8,16",
-        metavar="N,N,...",
-        help="with --transport zenoh: ring team sizes (default: 4,8,16)",
-    )
-    parser.add_argument(
-        "--generated",
-        metavar="N",
-        type=int,
-        help="instead: run the generated scenarios of seeds 0..N-1 (N: 1 to 1000) once each"
-        " and print the median and worst errors and durations (generality)",
-    )
-    parser.add_argument(
-        "--can",
-        action="store_true",
-        help="instead: the AGV bridge's benchmark on a vcan interface (run it in heft vcan --"
-        " heft bench --can): round trip CAN -> bridge -> Zenoh -> agent -> Zenoh -> bridge ->"
-        " CAN p50/p99, the fastest rate forwarded without loss, the bridge's CPU share",
-    )
-    parser.add_argument(
-        "--channel", metavar="NAME", help="with --can: the vcan interface (default: vcan8)"
-    )
-    parser.add_argument(
-        "--dashboard",
-        action="store_true",
-        help="instead: the dashboard's benchmark: 16 agents publishing estimates at 100 Hz into"
-        " it with 3 browsers (CPU, publish-to-browser latency p50/p99), then its memory over a"
-        " 10-minute recording replayed at 10x",
-    )
-    parser.add_argument(
-        "--noise",
-        action="store_true",
-        help="instead: the noise benchmark: the robust estimators, the paper's and the"
-        " centralized batch fit (heft baseline) on the same runs at 1 cm/s and 0.5 N of sensor"
-        " noise with lagging drives of 2 %% gain error, over --seeds seeds (with --generated N:"
-        " the generated scenarios 0..N-1): median errors, ratios to the fit, runs done within"
-        " 20 s, how often the truth is inside the published 95 %% intervals",
-    )
-    parser.add_argument(
-        "--seeds",
-        type=int,
-        metavar="N",
-        help="with --noise: seeds 0..N-1 (default: 20), in [1, 1000]",
-    )
-    parser.add_argument(
-        "--first-seed",
-        type=int,
-        metavar="S",
-        help="with --noise: seeds S..S+N-1 instead (default: 0; the published uncertainties"
-        " were calibrated on --first-seed 20 --seeds 40)",
-    )
-    parser.add_argument(
-        "--sweep",
-        action="store_true",
-        help="with --noise: over sigma_v in 0, 1 mm/s, 3 mm/s, 1 cm/s, 3 cm/s (sigma_f = 50"
-        " sigma_v): a markdown table of the medians",
-    )
-    parser.add_argument(
-        "--ideal-drives",
-        action="store_true",
-        help="with --noise (and --sweep): drives that apply exactly what they are commanded (no"
-        " lag, no gain error)",
-    )
-    parser.add_argument(
-        "--changes",
-        action="store_true",
-        help="with --noise: the load-change benchmark: per seed, the mass grown by 20 %% at"
-        " 25 s, the COM moved by 10 cm at 25 s, and no change until 45 s: changes noticed (the"
-        " team restarts) within 5 s, errors after re-estimation, false alarms",
-    )
-    parser.add_argument(
-        "--plot",
-        metavar="DIR",
-        help="with --sweep: write noise_sweep.png (error against sigma_v) into DIR",
-    )
-    parser.add_argument(
-        "--seconds",
-        type=float,
-        metavar="S",
-        help="with --can: length of the round-trip phase, 1 to 3600 (default: 20)",
-    )
-    parser.add_argument(
-        "--period-ms",
-        type=float,
-        metavar="MS",
-        help="with --can: the tick period of the round-trip phase, 1 to 100 (default: 10)",
-    )
-    parser.set_defaults(handler=cmd_bench)
 
 
 def _add_sim(commands: argparse._SubParsersAction) -> None:

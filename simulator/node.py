@@ -40,6 +40,7 @@ from agent.platform.process import RejectLog
 from agent.platform.protocol import Clock, Command, Control, Keys, Measurement, PlantStatus
 from agent.platform.resend import ResendTimeout
 from agent.platform.robot_io import AgentsPort, Liveliness
+from agent.platform.statistics import percentile
 from agent.platform.zenoh_robot_io import ZenohAgentsPort
 from agent.platform.zenoh_session import ZenohSettings, open_session
 from simulator.plant import Plant
@@ -288,10 +289,10 @@ class PlantNode:
         return 0
 
     def status(self) -> PlantStatus:
-        lat = sorted(self.latencies)
+        lat = list(self.latencies)
 
-        def pct(p: float) -> float | None:
-            return lat[min(len(lat) - 1, round(p * (len(lat) - 1)))] * 1e3 if lat else None
+        def ms(q: float) -> float | None:
+            return percentile(lat, q) * 1e3 if lat else None
 
         return PlantStatus(
             tick=self.plant.tick,
@@ -303,8 +304,8 @@ class PlantNode:
             resent=self.resent,
             decode_errors=self.port.rejects.total,
             lost=tuple(sorted(self.lost)),
-            latency_ms_p50=pct(0.5),
-            latency_ms_p99=pct(0.99),
+            latency_ms_p50=ms(50),
+            latency_ms_p99=ms(99),
             latency_ms_mean=statistics.fmean(lat) * 1e3 if lat else None,
             latency_samples=self.latency_count,
         )

@@ -56,6 +56,8 @@ from agent.platform.config import (
 )
 from agent.platform.geometry import Vec2
 
+PAPER_SCENARIO = Path(__file__).resolve().parent / "scenarios" / "paper.toml"
+"""The paper's Sec. VI scenario, shipped with the simulator package."""
 MAX_PHYSICS_HZ = 100_000.0
 """Physics steps per second, at most."""
 MAX_SUBSTEPS = 100

@@ -13,6 +13,16 @@ to ``commands`` (the ``argparse`` subparsers of ``heft``), each with
 status; it raises :class:`~agent.platform.command_line.UsageError` for bad input, reported here as
 one ``heft: error: ...`` line with exit status 2. ``register`` should import only what building
 the parser needs, so that ``heft agent`` on a robot does not load the simulator's libraries.
+
+The benchmarks are subcommands of ``heft bench``, registered alike by each package that owns
+some, in the group :data:`BENCH_GROUP`, from its ``bench`` sub-package::
+
+    [project.entry-points."heft.bench"]
+    simulator = "simulator.bench.cli:register"
+
+``register(benchmarks)`` adds them to ``benchmarks`` (the subparsers of ``heft bench``). A
+benchmark's handler returns 0 when every goal it checks is met, 1 when one is not
+(:mod:`agent.platform.goals`).
 """
 
 from __future__ import annotations
@@ -34,6 +44,8 @@ bad config (2) it may pass, so service units restart on it."""
 
 GROUP = "heft.commands"
 """The entry-point group of ``register(commands)`` functions."""
+BENCH_GROUP = "heft.bench"
+"""The entry-point group of ``register(benchmarks)`` functions (``heft bench``'s)."""
 
 
 def _version() -> str:
@@ -43,16 +55,29 @@ def _version() -> str:
         return "unknown"
 
 
-def _register_commands(commands: argparse._SubParsersAction) -> None:
-    """Let every installed package add its commands, in the order of the entry points' names.
+class _Subcommand(argparse.ArgumentParser):
+    """The parser of a subcommand (``heft run``, ``heft bench noise``): an argument it does not
+    know is its own error, said with its own usage (``heft bench noise: error: unrecognized
+    arguments: --plot x``), not left to ``heft``'s, which cannot say whose option it is not."""
 
-    A package whose commands cannot be imported (an optional dependency missing) is left out
-    with a warning, so that the other packages' commands still work.
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
+
+
+def _register(group: str, what: str, subparsers: argparse._SubParsersAction) -> None:
+    """Let every installed package add its subcommands of ``group`` (``what`` they are, in
+    messages) to ``subparsers``, in the order of the entry points' names.
+
+    A package whose subcommands cannot be imported (an optional dependency missing) is left
+    out with a warning, so that the other packages' still work.
     """
-    entries = sorted(metadata.entry_points(group=GROUP), key=lambda e: e.name)
+    entries = sorted(metadata.entry_points(group=group), key=lambda e: e.name)
     if not entries:
         print(
-            f"{PROG}: warning: no commands installed (entry points {GROUP!r});"
+            f"{PROG}: warning: no {what} installed (entry points {group!r});"
             " install the project: pip install -e .",
             file=sys.stderr,
         )
@@ -61,11 +86,36 @@ def _register_commands(commands: argparse._SubParsersAction) -> None:
             register = entry.load()
         except ImportError as err:
             print(
-                f"{PROG}: warning: the {entry.name} commands are unavailable ({err})",
+                f"{PROG}: warning: the {entry.name} {what} are unavailable ({err})",
                 file=sys.stderr,
             )
             continue
-        register(commands)
+        register(subparsers)
+
+
+def _add_bench(commands: argparse._SubParsersAction) -> None:
+    """``heft bench``: every installed package's benchmarks (:data:`BENCH_GROUP`) as its
+    subcommands; without one, its help and exit status 2."""
+    parser = commands.add_parser(
+        "bench",
+        help="the benchmarks: accuracy, noise, speed, CAN bridge, dashboard",
+        formatter_class=HelpFormatter,
+        description=(
+            "Run one benchmark and print its report. A benchmark that checks goals prints,\n"
+            "last, each goal's measured figure and whether it was met.\n\n"
+            "Exit status: 0 every goal met (or the benchmark checks none), 1 a goal not met\n"
+            "or the benchmark could not measure, 2 bad arguments, 130 interrupted."
+        ),
+        epilog="Run 'heft bench BENCHMARK --help' for a benchmark's options.",
+    )
+    benchmarks = parser.add_subparsers(dest="benchmark", title="benchmarks", metavar="BENCHMARK")
+    _register(BENCH_GROUP, "benchmarks", benchmarks)
+
+    def no_benchmark(args: argparse.Namespace) -> int:
+        parser.print_help(sys.stderr)
+        return 2
+
+    parser.set_defaults(handler=no_benchmark)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,8 +130,11 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Run 'heft COMMAND --help' for a command's options.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
-    commands = parser.add_subparsers(dest="command", title="commands", metavar="COMMAND")
-    _register_commands(commands)
+    commands = parser.add_subparsers(
+        dest="command", title="commands", metavar="COMMAND", parser_class=_Subcommand
+    )
+    _register(GROUP, "commands", commands)
+    _add_bench(commands)
     return parser
 
 

@@ -1,1 +1,1 @@
-"""The simulator's benchmarks (``heft bench accuracy|zenoh|noise|changes``)."""
+"""The simulator's benchmarks (``heft bench accuracy|generated|zenoh|noise|sweep|changes``)."""

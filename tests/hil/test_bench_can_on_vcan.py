@@ -1,4 +1,4 @@
-"""``heft bench --can`` for real: one short benchmark of a bridge on vcan (``make hil``, or
+"""``heft bench can`` for real: one short benchmark of a bridge on vcan (``make hil``, or
 ``heft vcan -- pytest tests/hil/test_bench_can_on_vcan.py``)."""
 
 from __future__ import annotations

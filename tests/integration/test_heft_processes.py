@@ -82,11 +82,12 @@ def test_sim_says_which_bus_it_cannot_open_with_status_4() -> None:
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--seeds", "3"], "--seeds needs --noise"),
-        (["--noise", "--plot", "x"], "--plot needs --sweep"),
-        (["--noise", "--seeds", "0"], "--seeds"),
-        (["--first-seed", "20"], "--first-seed needs --noise"),
-        (["--noise", "--first-seed", "-1"], "--first-seed"),
+        (["accuracy", "--seeds", "3"], "heft bench accuracy: error: unrecognized arguments"),
+        (["noise", "--plot", "x"], "heft bench noise: error: unrecognized arguments: --plot"),
+        (["noise", "--seeds", "0"], "heft: error: --seeds"),
+        (["changes", "--generated", "3"], "changes: error: unrecognized arguments: --generated"),
+        (["noise", "--first-seed", "-1"], "heft: error: --first-seed"),
+        (["noise", "--generated", "3", "x.toml"], "not allowed with argument --generated"),
     ],
 )
 def test_bench_noise_options(args: list[str], message: str) -> None:

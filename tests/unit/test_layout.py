@@ -13,13 +13,14 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.dispatch import GROUP, main
+from agent.platform.dispatch import BENCH_GROUP, GROUP, main
 from tests.helpers.paths import ROOT
 
 PRODUCT_PACKAGES = ("agent", "simulator", "bridge", "dashboard")
 """The packages the product ships (bridge and dashboard once they exist)."""
 TOP_LEVEL = {*PRODUCT_PACKAGES, "tests", "deploy"}
 COMMANDS = {"run", "scenario", "bench", "agent", "sim", "router", "demo", "deploy"}
+BENCHMARKS = {"accuracy", "generated", "zenoh", "noise", "sweep", "changes", "can", "dashboard"}
 
 
 # ------------------------------------------------------------------------------ the tree
@@ -43,6 +44,10 @@ def test_the_distribution_ships_only_the_products_packages() -> None:
     assert set(declared) <= set(PRODUCT_PACKAGES), declared
     for package, target in declared.items():
         assert target == f"{package}.cli:register", (package, target)
+    benchmarks = pyproject["project"]["entry-points"][BENCH_GROUP]
+    assert set(benchmarks) == {"simulator", "bridge", "dashboard"}, benchmarks
+    for package, target in benchmarks.items():
+        assert target == f"{package}.bench.cli:register", (package, target)
 
 
 # ------------------------------------------------------------------------------ import graph
@@ -143,26 +148,47 @@ def test_no_import_cycle_between_the_products_modules() -> None:
 
 
 # ------------------------------------------------------------------------------ heft --help
-def registered_commands() -> set[str]:
-    """The commands the packages of the entry-point group register."""
+def registered(group: str) -> set[str]:
+    """The subcommands the packages of the entry-point group ``group`` register."""
     names: set[str] = set()
-    for entry in metadata.entry_points(group=GROUP):
+    for entry in metadata.entry_points(group=group):
         commands = argparse.ArgumentParser().add_subparsers()
         entry.load()(commands)
         names.update(commands.choices)
     return names
 
 
+def listed(help_text: str, title: str, metavar: str) -> list[str]:
+    """The subcommands a help text lists under ``title``, asserting one line each."""
+    block = help_text.split(f"\n{title}:\n", 1)[1].split("\n\n", 1)[0].splitlines()
+    assert block[0].strip() == metavar, block
+    found = [re.match(r"^    (\S+) +\S", line) for line in block[1:]]
+    assert all(found), block  # no continuation line: one line per subcommand
+    return sorted(m.group(1) for m in found if m)
+
+
 def test_heft_help_lists_every_registered_command_on_one_line(capsys, monkeypatch) -> None:
     monkeypatch.setenv("COLUMNS", "80")
-    registered = registered_commands()
-    assert registered >= COMMANDS
+    commands = registered(GROUP) | {"bench"}  # heft bench: the dispatcher's own
+    assert commands >= COMMANDS
     with pytest.raises(SystemExit) as exited:
         main(["--help"])
     assert exited.value.code == 0
-    out = capsys.readouterr().out
-    block = out.split("\ncommands:\n", 1)[1].split("\n\n", 1)[0].splitlines()
-    assert block[0].strip() == "COMMAND", block
-    listed = [re.match(r"^    (\S+) +\S", line) for line in block[1:]]
-    assert all(listed), block  # no continuation line: one line per command
-    assert sorted(m.group(1) for m in listed if m) == sorted(registered)
+    assert listed(capsys.readouterr().out, "commands", "COMMAND") == sorted(commands)
+
+
+def test_heft_bench_help_lists_every_registered_benchmark_on_one_line(capsys, monkeypatch) -> None:
+    monkeypatch.setenv("COLUMNS", "80")
+    benchmarks = registered(BENCH_GROUP)
+    assert benchmarks >= BENCHMARKS
+    with pytest.raises(SystemExit) as exited:
+        main(["bench", "--help"])
+    assert exited.value.code == 0
+    assert listed(capsys.readouterr().out, "benchmarks", "BENCHMARK") == sorted(benchmarks)
+
+
+def test_heft_bench_without_a_benchmark_prints_its_help_and_exits_two(capsys) -> None:
+    assert main(["bench"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("usage: heft bench")
+    assert listed(err, "benchmarks", "BENCHMARK") == sorted(registered(BENCH_GROUP))

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from agent.platform.dispatch import GROUP, main
+from agent.platform.dispatch import BENCH_GROUP, GROUP, build_parser, main
 from tests.helpers.paths import PAPER
 
 PLOTS = ("relative_positions.png", "inertia_mass.png", "com_observer.png")
@@ -126,6 +126,7 @@ def test_bad_scenario_exits_two_with_one_line(tmp_path: Path) -> None:
 
 def test_help_works_for_every_command(capsys: pytest.CaptureFixture[str]) -> None:
     commands = (["run"], ["scenario"], ["scenario", "generate"], ["bench"], ["demo"], ["sim"])
+    commands += tuple(["bench", name] for name in ("accuracy", "noise", "can", "dashboard"))
     for argv in ([], *commands, ["agent"], ["router"]):
         with pytest.raises(SystemExit) as exit_info:
             main([*argv, "--help"])
@@ -146,8 +147,9 @@ def test_bench_help_shows_the_benchmark_default(capsys: pytest.CaptureFixture[st
     from simulator.bench.accuracy import DEFAULT_REPEAT
 
     with pytest.raises(SystemExit):
-        main(["bench", "--help"])
+        main(["bench", "accuracy", "--help"])
     assert f"number of runs (default: {DEFAULT_REPEAT})" in capsys.readouterr().out
+    assert build_parser().parse_args(["bench", "accuracy"]).repeat == DEFAULT_REPEAT
 
 
 def test_no_command_prints_the_help_and_exits_two(capsys: pytest.CaptureFixture[str]) -> None:
@@ -156,12 +158,24 @@ def test_no_command_prints_the_help_and_exits_two(capsys: pytest.CaptureFixture[
     assert out == "" and err.startswith("usage: heft") and "commands:" in err
 
 
+def with_broken_entry(monkeypatch: pytest.MonkeyPatch, broken_group: str) -> None:
+    """The installed entry points, plus one of ``broken_group`` whose module is not there."""
+    entry_points = metadata.entry_points
+    broken = metadata.EntryPoint(
+        name="broken", value="no_such_package.cli:register", group=broken_group
+    )
+
+    def with_broken(group: str):
+        installed = list(entry_points(group=group))
+        return [*installed, broken] if group == broken_group else installed
+
+    monkeypatch.setattr(metadata, "entry_points", with_broken)
+
+
 def test_a_package_whose_commands_cannot_be_imported_is_left_out(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    broken = metadata.EntryPoint(name="broken", value="no_such_package.cli:register", group=GROUP)
-    installed = list(metadata.entry_points(group=GROUP))
-    monkeypatch.setattr(metadata, "entry_points", lambda group: [*installed, broken])
+    with_broken_entry(monkeypatch, GROUP)
     with pytest.raises(SystemExit) as exited:
         main(["--help"])
     assert exited.value.code == 0
@@ -169,3 +183,68 @@ def test_a_package_whose_commands_cannot_be_imported_is_left_out(
     assert "heft: warning: the broken commands are unavailable" in err
     assert "no_such_package" in err and err.count("\n") == 1
     assert "    run " in out and "    agent " in out
+
+
+def test_a_package_whose_benchmarks_cannot_be_imported_is_left_out(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with_broken_entry(monkeypatch, BENCH_GROUP)
+    with pytest.raises(SystemExit) as exited:
+        main(["bench", "--help"])
+    assert exited.value.code == 0
+    out, err = capsys.readouterr()
+    assert "heft: warning: the broken benchmarks are unavailable" in err
+    assert "no_such_package" in err and err.count("\n") == 1
+    assert "    accuracy " in out and "    can " in out
+
+
+# ------------------------------------------------------------------------------ heft bench
+BENCH_OPTIONS = {
+    "accuracy": {"--repeat": "2"},
+    "generated": {"--count": "2"},
+    "zenoh": {"--sizes": "4"},
+    "noise": {"--seeds": "2", "--first-seed": "2", "--generated": "2", "--ideal-drives": None},
+    "sweep": {
+        "--seeds": "2",
+        "--first-seed": "2",
+        "--generated": "2",
+        "--ideal-drives": None,
+        "--plot": "plots",
+    },
+    "changes": {"--seeds": "2", "--first-seed": "2"},
+    "can": {"--channel": "vcan1", "--seconds": "2", "--period-ms": "5"},
+    "dashboard": {},
+}
+"""Each benchmark's options, and a value each accepts (None: a flag)."""
+
+
+def test_each_benchmark_takes_its_own_options_and_refuses_the_others(capsys) -> None:
+    parser = build_parser()
+    everyone = {option: value for own in BENCH_OPTIONS.values() for option, value in own.items()}
+    for benchmark, own in BENCH_OPTIONS.items():
+        for option, value in everyone.items():
+            argv = ["bench", benchmark, option] + ([] if value is None else [value])
+            if option in own:
+                args = parser.parse_args(argv)
+                assert args.benchmark == benchmark and callable(args.handler)
+                continue
+            with pytest.raises(SystemExit) as exited:
+                parser.parse_args(argv)
+            assert exited.value.code == 2, argv
+            err = capsys.readouterr().err
+            assert f"heft bench {benchmark}: error: unrecognized arguments: {option}" in err, err
+
+
+def test_noise_takes_a_scenario_or_the_generated_ones_not_both(capsys) -> None:
+    with pytest.raises(SystemExit) as exited:
+        build_parser().parse_args(["bench", "noise", "--generated", "3", str(PAPER)])
+    assert exited.value.code == 2
+    assert "not allowed with argument --generated" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("old", ["--noise", "--can", "--dashboard", "--generated", "--transport"])
+def test_the_old_bench_flags_are_refused(old: str, capsys) -> None:
+    with pytest.raises(SystemExit) as exited:
+        main(["bench", old])
+    assert exited.value.code == 2
+    assert f"heft bench: error: unrecognized arguments: {old}" in capsys.readouterr().err

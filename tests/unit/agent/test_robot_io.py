@@ -16,6 +16,7 @@ from agent.platform.faults import FaultSettings, FaultyTransport
 from agent.platform.process import RejectLog
 from agent.platform.protocol import Command, Control, Estimates, Measurement, Phase, Truth
 from agent.platform.robot_io import InMemoryRobots, Liveliness
+from agent.platform.statistics import percentile
 from agent.platform.transport import InMemoryTransport
 from simulator.inprocess import run_inprocess
 from simulator.node import PlantNode
@@ -133,3 +134,15 @@ def test_nodes_on_the_in_memory_seam_reproduce_the_inprocess_run(paper: Scenario
 @pytest.fixture()
 def paper() -> Scenario:
     return load_scenario(PAPER)
+
+
+def test_the_plants_latency_percentiles_are_the_projects_one(paper: Scenario) -> None:
+    """The plant's status gives its command latencies' p50 and p99 in ms, by
+    :func:`~agent.platform.statistics.percentile` (linear between the closest ranks)."""
+    hub = InMemoryRobots({1: (2,), 2: (1,)}, _rejects())
+    plant = PlantNode(paper, hub.robots_port(), "realtime")
+    assert plant.status().latency_ms_p50 is None  # none measured yet
+    plant.latencies.extend([0.004, 0.001, 0.003, 0.002])
+    status = plant.status()
+    assert status.latency_ms_p50 == pytest.approx(2.5)
+    assert status.latency_ms_p99 == pytest.approx(percentile([1.0, 2.0, 3.0, 4.0], 99)) == 3.97

@@ -1,20 +1,22 @@
-"""``heft bench --can``: its pure parts (percentiles, the rate search, ticks carried in frame
-values, the report) and its command line. The short benchmark of a real bridge on vcan is in
+"""``heft bench can``: its pure parts (the rate search, ticks carried in frame values, the
+report, its goal) and its command line. The short benchmark of a real bridge on vcan is in
 tests/hil/test_bench_can_on_vcan.py."""
 
 from __future__ import annotations
 
 import os
-import random
-import statistics
 from pathlib import Path
 
 import pytest
 
 from agent.platform.dispatch import main
+from agent.platform.goals import judge
 from agent.platform.protocol import Command, Measurement
+from agent.platform.statistics import percentile
+from bridge.bench import can as benchmark
 from bridge.bench.can import (
     FORCE_STEP,
+    GOALS,
     TICK_BASE,
     VELOCITY_STEP,
     CanBenchReport,
@@ -22,8 +24,8 @@ from bridge.bench.can import (
     RateSearch,
     RateStep,
     RoundTrips,
+    figures,
     format_can_report,
-    percentile,
     tick_of,
     tick_values,
     vcan_problem,
@@ -33,26 +35,6 @@ from bridge.codec import AgvCodec, AppliedForce, ForceCommand, Odometry
 from bridge.config import load_bridge_config
 from bridge.devtools.echo_agent import echo
 from bridge.devtools.rig import bridge_toml, cpu_seconds
-
-
-# ------------------------------------------------------------------------------ percentiles
-def test_percentile_interpolates_between_the_closest_ranks() -> None:
-    assert percentile([4.0, 1.0, 3.0, 2.0], 50) == 2.5
-    assert percentile([4.0, 1.0, 3.0, 2.0], 0) == 1.0
-    assert percentile([4.0, 1.0, 3.0, 2.0], 100) == 4.0
-    assert percentile([7.0], 99) == 7.0
-    assert percentile(range(1, 101), 99) == pytest.approx(99.01)
-    values = [random.Random(3).expovariate(1.0) for _ in range(1000)]
-    expected = statistics.quantiles(values, n=100, method="inclusive")
-    assert percentile(values, 50) == pytest.approx(expected[49])
-    assert percentile(values, 99) == pytest.approx(expected[98])
-
-
-def test_percentile_refuses_no_values_and_a_bad_q() -> None:
-    with pytest.raises(ValueError, match="no values"):
-        percentile([], 50)
-    with pytest.raises(ValueError, match="q must be"):
-        percentile([1.0], 101)
 
 
 # ------------------------------------------------------------------------------ the rate search
@@ -187,7 +169,8 @@ def test_the_report_gives_the_figures_and_where(tmp_path: Path) -> None:
     assert "measured in User-Mode Linux" in text
     assert "4 measured, 1 lost" in text
     assert f"p50                {percentile(trips.latencies_ms, 50):.3f} ms" in text
-    assert "(goal < 5 ms: met)" in text
+    assert f"p99                {percentile(trips.latencies_ms, 99):.3f} ms" in text
+    assert [v.met for v in judge(GOALS, figures(report))] == [True]  # p99 3.9 ms
     assert "bridge CPU         7.2 % of one CPU" in text
     assert "fastest without loss: 50 ticks/s = 160 frames/s read + 50 frames/s written" in text
     assert report.fastest_clean is report.steps[0]
@@ -197,23 +180,52 @@ def test_the_report_gives_the_figures_and_where(tmp_path: Path) -> None:
     assert "no step without loss, down to 50 ticks/s" in text
 
 
+def test_the_goal_is_the_round_trips_p99_below_5_ms() -> None:
+    def verdict(latencies: list[float]) -> bool:
+        trips = RoundTrips(latencies, len(latencies), 0, 0, 1.0)
+        report = CanBenchReport(CanBenchSettings(), "natively", trips, [], False)
+        return judge(GOALS, figures(report))[0].met
+
+    assert verdict([1.0] * 99 + [4.99]) and not verdict([1.0] * 98 + [5.0, 5.0])
+    assert not verdict([])  # nothing measured meets no goal
+
+
 # ------------------------------------------------------------------------------ the command
+@pytest.mark.parametrize("slowest, status", [(4.0, 0), (9.0, 1)])
+def test_bench_can_exits_with_its_goals_verdict(monkeypatch, capsys, slowest, status) -> None:
+    """A fake run of the benchmark (no bus): exit 1 when the p99 misses its goal."""
+    asked = []
+
+    def run(settings: CanBenchSettings) -> CanBenchReport:
+        asked.append(settings)
+        trips = RoundTrips([1.0] * 50 + [slowest] * 2, 52, 0, 0, settings.seconds)
+        return CanBenchReport(settings, "natively", trips, [step(50)], False)
+
+    monkeypatch.setattr(benchmark, "vcan_problem", lambda channel: None)
+    monkeypatch.setattr(benchmark, "run_can_benchmark", run)
+    argv = ["bench", "can", "--channel", "vcan3", "--seconds", "2", "--period-ms", "20"]
+    assert main(argv) == status
+    assert asked == [CanBenchSettings(channel="vcan3", seconds=2.0, period_s=0.02)]
+    out = capsys.readouterr().out
+    assert out.startswith("heft bench can: one AGV bridge on vcan3")
+    verdict = "met" if status == 0 else "NOT met"
+    assert f"(below 5 ms): {verdict}\ngoals: {verdict}\n" in out
+
+
 def test_bench_can_without_vcan_says_where_to_run_it(capsys) -> None:
     """No interface vcan99 exists here nor in ``heft vcan`` (vcan0..vcan8): one line."""
-    assert main(["bench", "--can", "--channel", "vcan99", "--seconds", "2"]) == 2
+    assert main(["bench", "can", "--channel", "vcan99", "--seconds", "2"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and err.startswith("heft: error: bench --can needs")
-    assert "heft vcan -- heft bench --can" in err
+    assert err.count("\n") == 1 and err.startswith("heft: error: bench can needs")
+    assert "heft vcan -- heft bench can" in err
 
 
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["bench", "--seconds", "5"], "--seconds needs --can"),
-        (["bench", "--can", "--period-ms", "0.5"], "--period-ms"),
-        (["bench", "--can", "--seconds", "nan"], "--seconds"),
-        (["bench", "--can", "--repeat", "2"], "--repeat is not an option"),
-        (["bench", "--can", "--channel", "a b"], "--channel"),
+        (["bench", "can", "--period-ms", "0.5"], "--period-ms"),
+        (["bench", "can", "--seconds", "nan"], "--seconds"),
+        (["bench", "can", "--channel", "a b"], "--channel"),
     ],
 )
 def test_bench_can_refuses_bad_options_in_one_line(argv, message, capsys) -> None:

@@ -58,7 +58,7 @@ def test_the_paper_scenario_with_real_sensor_noise(seed: int) -> None:
     assert worst["moment"] <= 0.025, worst
     assert worst["contact_to_com"] <= 0.025, worst
     # z_ij: not yet within 1.5 times the fit's (3.2 mm): the robust median is 4 mm, the
-    # paper's 30 mm (heft bench --noise); this bounds what is reached.
+    # paper's 30 mm (heft bench noise); this bounds what is reached.
     assert worst["relative"] <= 0.01, worst
     # Every robot published its uncertainty with its estimates.
     for i in range(1, outcome.scenario.n + 1):

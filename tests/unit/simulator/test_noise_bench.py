@@ -1,4 +1,5 @@
-"""``heft bench --noise``: its report from known results, one real seed, and its options."""
+"""``heft bench noise``, ``sweep`` and ``changes``: their reports and goals from known results,
+one real seed, and the commands' exit status from the goals' verdicts."""
 
 from __future__ import annotations
 
@@ -6,10 +7,15 @@ import dataclasses
 
 import pytest
 
+from agent.platform.dispatch import main
+from agent.platform.goals import exit_status, judge
+from simulator.bench import changes, noise
 from simulator.bench.noise import (
+    GOALS,
     NoiseSettings,
     SeedResult,
     coverage,
+    figures,
     format_noise_report,
     format_sweep,
     median,
@@ -42,24 +48,58 @@ def _result(
     )
 
 
-def test_the_report_judges_each_goal() -> None:
+NAMES = ("m", "J", "contact_to_com", "z_ij")
+
+
+def unmet(results) -> list[str]:
+    """The goals of the noise benchmark ``results`` do not meet, by what they measure."""
+    return [v.goal.measured for v in judge(GOALS, figures(results)) if not v.met]
+
+
+def test_the_report_and_each_goals_verdict() -> None:
     good = [_result(s, 1.2, inside=s != 0) for s in range(20)]  # 76 of 80 inside: 95 %
     assert median(good, "robust", "mass_rel") == pytest.approx(0.0012)
     assert median(good, "paper", "mass_rel") is None  # some run has none: unbounded
     assert coverage(good, "moment_rel") == (76, 80)
     report = format_noise_report(good, NoiseSettings(), "scenario 'paper'", 10.0)
-    assert report.endswith(": met")
     assert "m (%)" in report and "1.20" in report and "95 % of 80" in report
+    assert figures(good)["ratio mass_rel"] == pytest.approx(1.2)
+    assert figures(good)["inside moment_rel"] == pytest.approx(95.0)
+    assert unmet(good) == [] and exit_status(judge(GOALS, figures(good))) == 0
     slow = [*good[:-1], _result(19, 1.2, done=25.0)]
     assert "19/20" in format_noise_report(slow, NoiseSettings(), "x", 1.0)
-    assert format_noise_report(slow, NoiseSettings(), "x", 1.0).endswith("NOT met")
+    assert unmet(slow) == ["robust runs done within 20 s simulated"]
     worse = [_result(s, 2.0, inside=s != 0) for s in range(20)]
-    assert format_noise_report(worse, NoiseSettings(), "x", 1.0).endswith("NOT met")
+    assert unmet(worse) == [f"{q}: robust median / baseline's" for q in NAMES]
     off_the_floor = [*good[:-1], _result(19, 1.2, travel=3.5)]
     report = format_noise_report(off_the_floor, NoiseSettings(), "x", 1.0)
-    assert "on its floor: 19/20 (largest travel 3.50 m" in report and report.endswith("NOT met")
-    overconfident = [_result(s, 1.0, inside=s % 2 == 0) for s in range(20)]
-    assert format_noise_report(overconfident, NoiseSettings(), "x", 1.0).endswith("NOT met")
+    assert "on its floor: 19/20 (largest travel 3.50 m" in report
+    assert unmet(off_the_floor) == ["robust runs that kept the load on its floor"]
+    overconfident = [_result(s, 1.0, inside=s % 2 == 0) for s in range(20)]  # 50 % inside
+    assert unmet(overconfident) == [f"{q}: truth inside the 95 % intervals" for q in NAMES]
+    always = [_result(s, 1.0) for s in range(20)]  # 100 %: the intervals are too wide
+    assert len(unmet(always)) == 4 and exit_status(judge(GOALS, figures(always))) == 1
+
+
+@pytest.mark.parametrize("late, status", [(False, 0), (True, 1)])
+def test_bench_noise_exits_with_its_goals_verdict(monkeypatch, capsys, late, status) -> None:
+    """The command's exit status is the goals' verdict: seed 3 done at 25 s fails one."""
+    finished = {3: 25.0 if late else 12.0}
+    results = [_result(s, 1.2, inside=s != 0, done=finished.get(s, 12.0)) for s in range(20)]
+    seen = []
+
+    def run(scenarios, settings, on_seed):
+        seen.append(settings.seeds)
+        return results
+
+    monkeypatch.setattr(noise, "run_noise_bench", run)
+    assert main(["bench", "noise", "--seeds", "20"]) == status
+    out = capsys.readouterr().out
+    assert seen == [20] and out.startswith("heft bench noise: scenario 'paper', 20 seeds")
+    assert out.rstrip().endswith("goals: NOT met" if late else "goals: met")
+    goals = out.split("\ngoals:\n", 1)[1].splitlines()
+    line = next(line for line in goals if "runs done within 20 s" in line)
+    assert line.endswith("(at least 100 %): NOT met" if late else "(at least 100 %): met")
 
 
 def test_the_sweep_table_and_plot(tmp_path) -> None:
@@ -84,30 +124,51 @@ def test_one_seed_against_the_centralized_fit() -> None:
     assert result.floor["within"], result.floor
 
 
+def change(seed: int, case: str, mass: float = 0.006, **odd) -> changes.ChangeResult:
+    fields = dict(
+        seed=seed,
+        case=case,
+        latency_s=None if case == "none" else 1.5,
+        false_alarms=0,
+        errors={"mass_rel": mass, "moment_rel": 0.005, "contact_to_com_m": 0.006},
+        converged=True,
+        on_floor=True,
+        baseline={}
+        if case == "none"
+        else {"mass_rel": 0.004, "moment_rel": 0.01, "contact_to_com_m": 0.012},
+    )
+    return changes.ChangeResult(**{**fields, **odd})
+
+
 def test_the_change_report_sets_the_re_estimated_load_beside_its_fit() -> None:
-    from simulator.bench.changes import ChangeResult, format_change_report
-
-    def row(seed: int, case: str, mass: float) -> ChangeResult:
-        return ChangeResult(
-            seed=seed,
-            case=case,
-            latency_s=None if case == "none" else 1.5,
-            false_alarms=0,
-            errors={"mass_rel": mass, "moment_rel": 0.005, "contact_to_com_m": 0.006},
-            converged=True,
-            on_floor=True,
-            baseline={}
-            if case == "none"
-            else {"mass_rel": 0.004, "moment_rel": 0.01, "contact_to_com_m": 0.012},
-        )
-
-    results = [row(s, c, 0.006 + 0.001 * s) for s in range(3) for c in ("mass", "com", "none")]
-    report = format_change_report(results)
+    results = [change(s, c, 0.006 + 0.001 * s) for s in range(3) for c in changes.CASES]
+    report = changes.format_change_report(results)
     lines = {line.split()[0]: line for line in report.splitlines() if line.strip()}
     # Median re-estimated mass 0.7 % against the fit's 0.4 %: 1.75; J 0.5; ctc 0.5.
     assert lines["mass"].endswith("1.75 / 0.50 / 0.50")
     assert "0.40%" in lines["com"] and "12.0mm" in lines["com"]
-    assert report.splitlines()[-1] == "goals: met"
+    verdicts = judge(changes.GOALS, changes.figures(results))
+    assert all(v.met for v in verdicts) and len(verdicts) == 4
+
+
+@pytest.mark.parametrize(
+    "odd, unmet",
+    [
+        (dict(case="mass", latency_s=5.5), "changes noticed within 5 s"),
+        (dict(case="com", latency_s=None), "changes noticed within 5 s"),
+        (dict(case="none", false_alarms=1), "false alarms"),
+        (dict(case="none", converged=False), "runs done"),
+        (dict(case="com", on_floor=False), "runs that kept the load on its floor"),
+    ],
+)
+def test_each_change_goal_fails_on_its_own(monkeypatch, capsys, odd, unmet) -> None:
+    results = [change(s, c) for s in range(2) for c in changes.CASES]
+    results.append(change(2, **odd))
+    verdicts = judge(changes.GOALS, changes.figures(results))
+    assert [v.goal.measured for v in verdicts if not v.met] == [unmet]
+    monkeypatch.setattr(changes, "run_change_bench", lambda scenario, settings, say: results)
+    assert main(["bench", "changes", "--seeds", "2"]) == 1
+    assert capsys.readouterr().out.rstrip().endswith("goals: NOT met")
 
 
 def test_the_seeds_run_start_at_first_seed(monkeypatch) -> None:

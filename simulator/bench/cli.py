@@ -1,0 +1,412 @@
+"""The simulator's benchmarks, subcommands of ``heft bench`` (entry point of the group
+``heft.bench``)::
+
+    heft bench accuracy [SCENARIO] [-n/--repeat N]
+    heft bench generated [-n/--count N]
+    heft bench zenoh [--sizes 4,8,16]
+    heft bench noise [SCENARIO] [--seeds N] [--first-seed S] [--generated N] [--ideal-drives]
+    heft bench sweep [SCENARIO] [--seeds N] [--first-seed S] [--generated N] [--ideal-drives]
+                     [--plot DIR]
+    heft bench changes [SCENARIO] [--seeds N] [--first-seed S]
+
+Each runs in this process (``zenoh``: as processes on 127.0.0.1) and prints its report on
+standard output, its progress on stderr. ``generated``, ``noise`` and ``changes`` check goals
+(their modules' ``GOALS``): each goal's figure and verdict are printed last, and the exit
+status is 0 when every one is met, 1 when one is not. ``accuracy``, ``zenoh`` and ``sweep``
+report figures and check none: 0 once they ran.
+
+Building the parsers imports nothing heavy (no pymunk, numpy or matplotlib): the handlers
+import what they run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from agent.platform.command_line import PROG, HelpFormatter, UsageError, check_writable
+from agent.platform.config import Bound
+from agent.platform.goals import conclude
+from simulator.cli import load_scenario_argument
+from simulator.scenario import PAPER_SCENARIO
+
+if TYPE_CHECKING:
+    from simulator.bench.noise import NoiseSettings
+    from simulator.inprocess import RunOutcome
+    from simulator.scenario import Scenario
+
+NOISE_SEEDS = 20
+"""Seeds of ``noise``, ``sweep`` and ``changes`` when not told (that of
+:class:`simulator.bench.noise.NoiseSettings`)."""
+
+
+def register(benchmarks: argparse._SubParsersAction) -> None:
+    """Add the simulator's benchmarks to ``heft bench`` (entry point of the group
+    ``heft.bench``); a benchmark module with an ``add_parser(benchmarks)`` of its own joins
+    :data:`PARSERS`."""
+    for add_parser in PARSERS:
+        add_parser(benchmarks)
+
+
+def _say_run(label: str, outcome: RunOutcome) -> None:
+    """One progress line on stderr per benchmark run."""
+    state = "converged" if outcome.converged else "NOT converged"
+    print(
+        f"{PROG}: {label}: {state}, {outcome.sim_time_s:.2f} s simulated in"
+        f" {outcome.wall_s:.2f} s wall",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _scenario_argument(parser: argparse.ArgumentParser | argparse._MutuallyExclusiveGroup):
+    parser.add_argument(
+        "scenario",
+        metavar="SCENARIO",
+        nargs="?",
+        default=str(PAPER_SCENARIO),
+        help="scenario TOML file (default: the paper's, simulator/scenarios/paper.toml)",
+    )
+
+
+# ------------------------------------------------------------------------------ accuracy
+def cmd_accuracy(args: argparse.Namespace) -> int:
+    """``heft bench accuracy``: run a scenario several times; accuracy and speed."""
+    from simulator.bench.accuracy import format_report, run_benchmark
+
+    Bound(1, 1000, "runs").check("--repeat", args.repeat)
+    scenario = load_scenario_argument(args.scenario)
+
+    def on_run(k: int, outcome: RunOutcome) -> None:
+        _say_run(f"run {k}/{args.repeat}", outcome)
+
+    report = run_benchmark(scenario, args.repeat, source=args.scenario, on_run=on_run)
+    print(format_report(report))
+    return 0
+
+
+def _add_accuracy(benchmarks: argparse._SubParsersAction) -> None:
+    parser = benchmarks.add_parser(
+        "accuracy",
+        help="accuracy, step durations and speed of repeated runs",
+        formatter_class=HelpFormatter,
+        description=(
+            "Run SCENARIO in this process N times and print the worst final errors (mass %,\n"
+            "J %, contact-to-COM and z_ij in mm), the simulated time each paper step took,\n"
+            "how many times faster than real time the runs went (median, min, max) and the\n"
+            "peak resident memory. It checks no goal.\n\n"
+            "Exit status: 0 done, 2 bad scenario or arguments, 130 interrupted."
+        ),
+    )
+    _scenario_argument(parser)
+    parser.add_argument(
+        "-n",
+        "--repeat",
+        metavar="N",
+        type=int,
+        default=3,
+        help="number of runs (default: 3), in [1, 1000]",
+    )
+    parser.set_defaults(handler=cmd_accuracy)
+
+
+# ------------------------------------------------------------------------------ generated
+def cmd_generated(args: argparse.Namespace) -> int:
+    """``heft bench generated``: the generated scenarios once each (generality)."""
+    Bound(1, 1000, "scenarios").check("--count", args.count)
+    from simulator.bench.generated import GOALS, figures, format_generated, run_generated
+
+    def on_run(seed: int, outcome: RunOutcome) -> None:
+        _say_run(f"seed {seed}, {outcome.scenario.n} robots", outcome)
+
+    outcomes = run_generated(args.count, on_run)
+    print(format_generated(outcomes))
+    return conclude(GOALS, figures(outcomes))
+
+
+def _add_generated(benchmarks: argparse._SubParsersAction) -> None:
+    parser = benchmarks.add_parser(
+        "generated",
+        help="generality: the generated scenarios of seeds 0..N-1, once each",
+        formatter_class=HelpFormatter,
+        description=(
+            "Run the generated scenarios of seeds 0..N-1 (heft scenario generate: 3-8 robots,\n"
+            "every graph and load shape) once each in this process and print the median and\n"
+            "worst final errors and durations. Goal: every run converged.\n\n"
+            "Exit status: 0 every goal met, 1 one not met, 2 bad arguments, 130 interrupted."
+        ),
+    )
+    parser.add_argument(
+        "-n",
+        "--count",
+        metavar="N",
+        type=int,
+        default=20,
+        help="scenarios, seeds 0..N-1 (default: 20), in [1, 1000]",
+    )
+    parser.set_defaults(handler=cmd_generated)
+
+
+# ------------------------------------------------------------------------------ zenoh
+def cmd_zenoh(args: argparse.Namespace) -> int:
+    """``heft bench zenoh``: one process per robot, lockstep speed and real-time latency."""
+    try:
+        sizes = [int(s) for s in args.sizes.split(",")]
+    except ValueError:
+        raise UsageError(f"--sizes: expected numbers like 4,8,16, got {args.sizes!r}") from None
+    for n in sizes:
+        if n < 3 or 32 % n:
+            raise UsageError(f"--sizes: a ring team needs n >= 3 dividing 32, got {n}")
+    from simulator.bench.over_zenoh import format_zenoh_report, run_zenoh_benchmark
+
+    print(format_zenoh_report(run_zenoh_benchmark(sizes, _say_run)))
+    return 0
+
+
+def _add_zenoh(benchmarks: argparse._SubParsersAction) -> None:
+    parser = benchmarks.add_parser(
+        "zenoh",
+        help="processes over Zenoh: lockstep speed, real-time latency, CPU",
+        formatter_class=HelpFormatter,
+        description=(
+            "Run the team as processes on 127.0.0.1 (a Zenoh router, the plant, one agent per\n"
+            "robot): ring teams of each size in lockstep (how much faster than real time they\n"
+            "step, CPU per agent), then the paper's scenario in real time (command latency\n"
+            "p50/p99, late and missing commands, CPU per agent). It checks no goal.\n\n"
+            "Exit status: 0 done, 2 bad arguments, 130 interrupted."
+        ),
+    )
+    parser.add_argument(
+        "--sizes",
+        default="4,8,16",
+        metavar="N,N,...",
+        help="ring team sizes, each n >= 3 dividing 32 (default: 4,8,16)",
+    )
+    parser.set_defaults(handler=cmd_zenoh)
+
+
+# ------------------------------------------------------------------------------ noise
+def _seeds(args: argparse.Namespace, default: int) -> tuple[int, int]:
+    """``--seeds`` (else ``default``) and ``--first-seed``, range-checked."""
+    seeds = default if args.seeds is None else args.seeds
+    if args.seeds is not None:
+        Bound(1, 1000, "seeds").check("--seeds", args.seeds)
+    Bound(0, 100_000, "seeds").check("--first-seed", args.first_seed)
+    return seeds, args.first_seed
+
+
+def _noisy_runs(
+    args: argparse.Namespace,
+) -> tuple[Callable[[int], Scenario], str, NoiseSettings]:
+    """What ``noise`` and ``sweep`` run: each seed's scenario (SCENARIO's, or with
+    ``--generated`` the generated one of that seed), its label, and the settings."""
+    from simulator.bench.noise import (
+        GENERATED_INERTIA_BRAKE_S,
+        GENERATED_PUSH_DAMPING,
+        NoiseSettings,
+    )
+
+    if args.generated is not None:
+        from simulator.generate import generate_scenario
+
+        Bound(1, 1000, "scenarios").check("--generated", args.generated)
+        seeds, first = _seeds(args, args.generated)
+        scenarios, label = generate_scenario, "generated scenarios"
+    else:
+        scenario = load_scenario_argument(args.scenario)
+        seeds, first = _seeds(args, NOISE_SEEDS)
+        label = f"scenario {scenario.name!r}"
+
+        def scenarios(seed: int) -> Scenario:
+            return scenario
+
+    settings = dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first)
+    if args.generated is not None:
+        settings = dataclasses.replace(
+            settings,
+            push_damping=GENERATED_PUSH_DAMPING,
+            inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
+        )
+    if args.ideal_drives:
+        settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
+    return scenarios, label, settings
+
+
+def cmd_noise(args: argparse.Namespace) -> int:
+    """``heft bench noise``: the robust estimators, the paper's and the centralized fit on the
+    same noisy runs."""
+    scenarios, label, settings = _noisy_runs(args)
+    from simulator.bench.noise import (
+        GOALS,
+        figures,
+        format_noise_report,
+        run_noise_bench,
+        timed,
+    )
+
+    def on_seed(result) -> None:
+        state = "done" if result.robust_done else "NOT done"
+        print(
+            f"{PROG}: seed {result.seed}: robust {state} at {result.robust_time_s:.2f} s simulated",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    results, wall = timed(run_noise_bench, scenarios, settings, on_seed)
+    print(format_noise_report(results, settings, label, wall))
+    return conclude(GOALS, figures(results))
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    """``heft bench sweep``: the noise benchmark over σ_v, a table (and a plot)."""
+    if args.plot is not None:
+        check_writable(Path(args.plot), directory=True)
+    scenarios, label, settings = _noisy_runs(args)
+    from simulator.bench.noise import format_sweep, plot_sweep, run_sweep
+
+    found = run_sweep(
+        scenarios,
+        settings,
+        lambda sigma, _: print(f"{PROG}: sigma_v {sigma:g} m/s done", file=sys.stderr),
+    )
+    print(format_sweep(found, label))
+    if args.plot is not None:
+        print(f"plot: {plot_sweep(found, Path(args.plot) / 'noise_sweep.png', label)}")
+    return 0
+
+
+def _add_noise_options(parser: argparse.ArgumentParser) -> None:
+    """SCENARIO or ``--generated``, ``--seeds``, ``--first-seed``, ``--ideal-drives``."""
+    which = parser.add_mutually_exclusive_group()
+    _scenario_argument(which)
+    which.add_argument(
+        "--generated",
+        metavar="N",
+        type=int,
+        help="instead of SCENARIO: the generated scenarios of seeds 0..N-1 (N: 1 to 1000;"
+        " --seeds, if given, counts them instead), their robust robots damping the push",
+    )
+    _add_seed_options(parser)
+    parser.add_argument(
+        "--ideal-drives",
+        action="store_true",
+        help="drives that apply exactly what they are commanded (no lag, no gain error)",
+    )
+
+
+def _add_seed_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        metavar="N",
+        help=f"seeds 0..N-1 (default: {NOISE_SEEDS}), in [1, 1000]",
+    )
+    parser.add_argument(
+        "--first-seed",
+        type=int,
+        metavar="S",
+        default=0,
+        help="seeds S..S+N-1 instead (default: 0; the published uncertainties were calibrated"
+        " on --first-seed 20 --seeds 40)",
+    )
+
+
+def _add_noise(benchmarks: argparse._SubParsersAction) -> None:
+    parser = benchmarks.add_parser(
+        "noise",
+        help="under sensor noise: robust vs paper vs the centralized fit",
+        formatter_class=HelpFormatter,
+        description=(
+            "The robust estimators, the paper's and the centralized batch fit (heft baseline)\n"
+            "on the same runs at 1 cm/s and 0.5 N of sensor noise with lagging drives of 2 %\n"
+            "gain error, over --seeds seeds of SCENARIO (or of the generated scenarios):\n"
+            "median errors, ratios to the fit, runs done within 20 s, how often the truth is\n"
+            "inside the published 95 % intervals.\n\n"
+            "Goals: each median within 1.5x the fit's, every robust run done within 20 s and\n"
+            "on its floor, the 95 % intervals holding the truth 90-99 % of the time.\n\n"
+            "Exit status: 0 every goal met, 1 one not met, 2 bad scenario or arguments,\n"
+            "130 interrupted."
+        ),
+    )
+    _add_noise_options(parser)
+    parser.set_defaults(handler=cmd_noise)
+
+
+def _add_sweep(benchmarks: argparse._SubParsersAction) -> None:
+    parser = benchmarks.add_parser(
+        "sweep",
+        help="the noise benchmark over sigma_v: a table of medians, a plot",
+        formatter_class=HelpFormatter,
+        description=(
+            "The noise benchmark at sigma_v 0, 1 mm/s, 3 mm/s, 1 cm/s and 3 cm/s (sigma_f =\n"
+            "50 sigma_v; the drives ideal at 0): a markdown table of each estimator's median\n"
+            "errors. It checks no goal.\n\n"
+            "Exit status: 0 done, 2 bad scenario or arguments, 130 interrupted."
+        ),
+    )
+    _add_noise_options(parser)
+    parser.add_argument(
+        "--plot",
+        metavar="DIR",
+        help="write noise_sweep.png (error against sigma_v) into DIR, created if needed",
+    )
+    parser.set_defaults(handler=cmd_sweep)
+
+
+# ------------------------------------------------------------------------------ changes
+def cmd_changes(args: argparse.Namespace) -> int:
+    """``heft bench changes``: a changed mass, a moved COM and no change, per seed."""
+    scenario = load_scenario_argument(args.scenario)
+    seeds, first = _seeds(args, NOISE_SEEDS)
+    from simulator.bench.changes import GOALS, figures, format_change_report, run_change_bench
+    from simulator.bench.noise import NoiseSettings
+
+    def on_result(result) -> None:
+        noticed = "-" if result.latency_s is None else f"{result.latency_s:.2f} s"
+        print(
+            f"{PROG}: seed {result.seed} {result.case}: restart after {noticed},"
+            f" false alarms {result.false_alarms}",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    settings = dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first)
+    results = run_change_bench(scenario, settings, on_result)
+    print(format_change_report(results))
+    return conclude(GOALS, figures(results))
+
+
+def _add_changes(benchmarks: argparse._SubParsersAction) -> None:
+    parser = benchmarks.add_parser(
+        "changes",
+        help="load changes under noise: noticed, re-estimated, no false alarm",
+        formatter_class=HelpFormatter,
+        description=(
+            "Per seed of the noise benchmark's runs of SCENARIO (robust estimators): the mass\n"
+            "grown by 20 % at 25 s, the COM moved by 10 cm at 25 s, and no change until 45 s:\n"
+            "changes noticed (the team restarts), the delays, errors after re-estimation\n"
+            "beside the centralized fit's, false alarms.\n\n"
+            "Goals: every change noticed within 5 s, no false alarm, every run done and on\n"
+            "its floor.\n\n"
+            "Exit status: 0 every goal met, 1 one not met, 2 bad scenario or arguments,\n"
+            "130 interrupted."
+        ),
+    )
+    _scenario_argument(parser)
+    _add_seed_options(parser)
+    parser.set_defaults(handler=cmd_changes)
+
+
+PARSERS: tuple[Callable[[argparse._SubParsersAction], None], ...] = (
+    _add_accuracy,
+    _add_generated,
+    _add_zenoh,
+    _add_noise,
+    _add_sweep,
+    _add_changes,
+)
+"""Each adds one benchmark's parser to ``heft bench``, in the order its help lists them."""
