@@ -1,14 +1,15 @@
 """The in-process run: one plant, ``n`` agents and the in-memory transport, stepped in lockstep
 as fast as the machine allows.
 
-Each tick ``k``: the plant is sampled, every agent steps on its own measurement and on the
-messages delivered to it so far (it uses those stamped before ``k``), the agents' force commands
-go to the plant, their messages go through the transport, and the plant advances one sensor
-period. The run ends once every agent has reached the ``done`` phase (and the scenario's
-:attr:`~simulator.scenario.Scenario.end_s` has passed: its load changes and its hold), or at
-the scenario's ``max_time_s``. Ground truth is recorded beside the agents' estimates of the
-same instant, for evaluation only (an agent that lost a message may lag a tick: such instants
-are not recorded).
+The tick and the run's end are :mod:`simulator.lockstep`'s, as over processes. Each tick ``k``:
+the plant is sampled, every agent steps on its own measurement and on the messages delivered to
+it so far (it uses those stamped before ``k``), their messages go through the transport, the
+agents' forces go to the plant, and the plant advances one sensor period. The run is over once
+the team is done (and the scenario's :attr:`~simulator.scenario.Scenario.end_s` has passed: its
+load changes and its hold), halted, or at the scenario's ``max_time_s``. Ground truth is
+recorded beside the agents' estimates of the same instant, every ``record_every`` ticks and
+from the tick the run is over at, for evaluation only (an agent that lost a message may lag a
+tick: such instants are not recorded).
 
 ``link="can"`` is the reference of a run over the AGVs' CAN buses (``heft run --can``): every
 measurement and every command is clamped and quantised as it is when it crosses the bus
@@ -24,18 +25,16 @@ from dataclasses import dataclass, field
 
 from agent.algorithm.agent import Agent
 from agent.algorithm.tuning import AgentConfig
-from agent.platform.protocol import Estimates, Measurement, Phase, Truth
+from agent.platform.protocol import Estimates, Measurement, Truth
 from agent.platform.transport import InMemoryTransport, Transport
 from simulator.history import History
-from simulator.plant import Plant
+from simulator.lockstep import ALIGN_TICKS, INTERRUPTED, PlantTicks, RunEnd, Verdict
 from simulator.scenario import Scenario
 
 Progress = Callable[[int, float, list[Agent]], None]
 LINKS = ("memory", "can")
 """How the robots' measurements and commands reach the agents in :func:`run_inprocess`: as
 they are, or quantised as on the AGVs' CAN buses."""
-ALIGN_TICKS = 64
-"""Ticks a finishing run waits for every agent's estimates to refer to the same instant."""
 
 
 @dataclass
@@ -109,33 +108,27 @@ def run_inprocess(
         from simulator.can_drivers import CanQuantiser
 
         quantiser = CanQuantiser(scenario.period_s)
-    plant = Plant(scenario)
+    plant = PlantTicks(scenario, quantiser)
+    end = RunEnd.of(scenario)
     agents = make_agents(scenario)
     transport = transport or InMemoryTransport(scenario.n, scenario.edges)
-    max_ticks = round(scenario.run.max_time_s / scenario.period_s)
-    end_tick = scenario.end_tick
     history: History[Sample] = History()
     phase_ticks: dict[str, int] = {}
     started = time.perf_counter()
-    converged = False
+    verdict: Verdict | None = None
+    over_at = -1  # the tick the run is over at (-1: not yet)
     pending: Truth | None = None  # truth at the instant the next step's estimates refer to
     final: Sample | None = None
-    finishing = False  # done (or out of time): stop at the next sample of aligned estimates
-    give_up = max_ticks + ALIGN_TICKS
     k = 0
-    interrupted = False
     try:
-        while k <= give_up:
+        while verdict is None or k <= over_at + ALIGN_TICKS:
             measurements = plant.measure()
-            if quantiser is not None:
-                measurements = [quantiser.measurement(m) for m in measurements]
             if on_measure is not None:
                 on_measure(measurements)
-            shares = []
+            forces, shares = [], []
             for agent, measurement in zip(agents, measurements):
                 command, share = agent.step(measurement, transport.receive(agent.robot))
-                force = command.force if quantiser is None else quantiser.force(command.force)
-                plant.command(agent.robot, force)
+                forces.append(command.force)
                 shares.append(share)
             for share in shares:
                 transport.send(share)
@@ -143,36 +136,27 @@ def run_inprocess(
             if pending is not None and all(a.instant == k - 1 for a in agents):
                 final = _sample(k - 1, scenario, pending, agents)
                 history.append(final)
-                if finishing:
+                if verdict is not None:
                     break
             team_phase = min(a.phase for a in agents)
             phase_ticks.setdefault(team_phase.label, k)
             if progress is not None and k % progress_every == 0:
                 progress(k, k * scenario.period_s, agents)
-            ended = team_phase == Phase.HALTED or (team_phase == Phase.DONE and k >= end_tick)
-            if not finishing and (ended or k >= max_ticks):
-                finishing = True
-                converged = all(a.phase == Phase.DONE for a in agents)
-                give_up = k + ALIGN_TICKS
+            if verdict is None:
+                verdict, over_at = end.over(k, agents), k
             # The plant has not moved since it was sampled: its truth is that of tick k.
-            pending = plant.truth() if (k % record_every == 0 or finishing) else None
-            plant.advance()
+            pending = plant.apply(forces, truth=k % record_every == 0 or verdict is not None)
             k += 1
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM/SIGHUP turned into it: keep what was done
         if final is None:
             raise
-        interrupted = True
-    assert final is not None
-    if interrupted:
-        reason = "interrupted"
-    elif not converged:
-        reason = f"out of simulated time (run.max_time_s = {scenario.run.max_time_s:g} s)"
-    else:
-        reason = ""
+        verdict = Verdict(INTERRUPTED, "asked to stop")
+    assert final is not None and verdict is not None
     return RunOutcome(
         scenario=scenario,
-        converged=converged and not interrupted,
-        reason=reason,
+        converged=not verdict.reason,
+        reason=verdict.reason,
+        detail=verdict.detail,
         ticks=final.truth.tick,
         wall_s=time.perf_counter() - started,
         final=final,

@@ -76,13 +76,13 @@ from agent.platform.zenoh_session import (
 )
 from simulator.history import History
 from simulator.inprocess import RunOutcome, Sample
+from simulator.lockstep import INTERRUPTED, RunEnd, Verdict, halted
 from simulator.scenario import Scenario, scenario_to_toml
 
 if TYPE_CHECKING:
     from simulator.can_drivers import CanLink
 
 Progress = Callable[[float, str], None]
-INTERRUPTED = "interrupted"
 ROUTER_LOST = "router lost"
 PLANT_LOST = "plant lost"
 AGENTS_NOT_UP = "agents did not come up"
@@ -464,15 +464,6 @@ def _team_name(scenario: Scenario) -> str:
     return re.sub(r"[^A-Za-z0-9_-]", "-", scenario.name)[:40] + f"-{os.getpid()}"
 
 
-@dataclasses.dataclass(frozen=True)
-class Verdict:
-    """Why a run ended: ``reason`` is short and machine-readable (``""``: converged), ``detail``
-    a sentence for people."""
-
-    reason: str = ""
-    detail: str = ""
-
-
 class RunFailed(Exception):
     """A run that ended before any instant was recorded; ``reason`` and ``detail`` say why."""
 
@@ -761,7 +752,7 @@ class _Watch:
                 f"{exits + '; ' if exits else ''}{why} at {self._t()}"
                 " (n is fixed: estimates without a robot would be wrong)"
             )
-            return Verdict(f"robot(s) {lost} lost" if lost else "team halted", detail)
+            return halted(lost, detail)
         return Verdict()
 
     def _processes(self) -> Verdict | None:
@@ -799,7 +790,6 @@ class _Watch:
 
     def _plant_exit(self, code: int) -> Verdict:
         collector = self.collector
-        max_time = self.scenario.run.max_time_s
         how = describe_exit(code)
         if collector.first_truth_at is None:
             if code == 1:  # the plant's --start-timeout: see heft sim
@@ -809,11 +799,9 @@ class _Watch:
             return Verdict(PLANT_LOST, f"the plant process ended before it started ({ended})")
         status = collector.plant_status
         tick = max(collector.latest_tick, status.tick if status else 0)
-        if code == 0 and tick >= round(max_time / self.scenario.period_s):
-            return Verdict(
-                f"out of simulated time (run.max_time_s = {max_time:g} s)",
-                f"the team was not done after the scenario's {max_time:g} s",
-            )
+        end = RunEnd.of(self.scenario)
+        if code == 0 and end.out_of_time(tick):
+            return end.out_of_time_verdict()
         return Verdict(PLANT_LOST, f"the plant process ended ({how}) at {self._t()}")
 
     def _stalled(self) -> Verdict | None:

@@ -5,6 +5,9 @@ each robot's measurement to its agent, applies each robot's latest command, and 
 clock, ground truth (for evaluation and display only: no agent subscribes to it) and
 counters.
 
+Each tick is :mod:`simulator.lockstep`'s, the in-process run's, and so is the last one
+(``run.max_time_s``); the clock says when the plant steps:
+
 - ``lockstep``: tick ``k`` is published, and the plant steps only once every live agent's
   command for tick ``k`` has arrived: deterministic, as fast as the agents allow. A robot that
   has not answered within a timeout that follows the time a tick takes
@@ -36,6 +39,7 @@ import time
 from collections import deque
 from typing import TYPE_CHECKING
 
+from agent.platform.geometry import Vec2
 from agent.platform.process import RejectLog
 from agent.platform.protocol import Clock, Command, Control, Keys, Measurement, PlantStatus
 from agent.platform.resend import ResendTimeout
@@ -43,13 +47,14 @@ from agent.platform.robot_io import AgentsPort, Liveliness
 from agent.platform.statistics import percentile
 from agent.platform.zenoh_robot_io import ZenohAgentsPort
 from agent.platform.zenoh_session import ZenohSettings, open_session
-from simulator.plant import Plant
+from simulator.lockstep import PlantTicks, RunEnd
 from simulator.scenario import Scenario
 
 if TYPE_CHECKING:
     from simulator.can_drivers import CanLink
 
 log = logging.getLogger("heft.sim")
+ZERO: Vec2 = (0.0, 0.0)
 LATENCY_SAMPLES = 10_000
 """Command latencies kept for the percentiles: the newest 25 s of four robots at 100 Hz
 (memory stays flat however long the plant runs)."""
@@ -77,7 +82,8 @@ class PlantNode:
         start_timeout_s: float = 30.0,
     ):
         self.scenario = scenario
-        self.plant = Plant(scenario)
+        self.plant = PlantTicks(scenario)
+        """The plant, tick by tick (the port carries the values: the buses quantise them)."""
         self.port = port
         self.clock = clock
         self.stop = stop or threading.Event()
@@ -147,7 +153,6 @@ class PlantNode:
             self.gone.setdefault(robot, set()).add(item.who)
             self.alive.discard(robot)
             self.commands.pop(robot, None)
-            self.plant.command(robot, (0.0, 0.0))
             self.publish_status()
 
     def _drain(self, timeout: float | None) -> None:
@@ -176,35 +181,37 @@ class PlantNode:
         return silent
 
     def _apply(self) -> None:
+        forces = [self._force(robot) for robot in range(1, self.scenario.n + 1)]
+        self.port.report(self.plant.apply(forces))
+
+    def _force(self, robot: int) -> Vec2:
+        """Robot ``robot``'s force for this tick: its newest command's, or zero when it is
+        lost, has sent none or (on the wall clock) has been silent too long; late and missing
+        commands counted."""
         k = self.plant.tick
-        for robot in range(1, self.scenario.n + 1):
-            command = self.commands.get(robot)
-            if robot in self.lost or command is None:
-                if robot not in self.lost:
-                    self.missing += 1
-                self.plant.command(robot, (0.0, 0.0))
-                continue
-            if self.clock == "realtime" and k - command.tick > WATCHDOG_TICKS:
-                if robot not in self.silent:
-                    self.silent.add(robot)
-                    log.warning(
-                        "robot %d: no command for %d ticks at t = %.2f s; zero force until it"
-                        " answers again",
-                        robot,
-                        k - command.tick,
-                        self.plant.time_s,
-                    )
+        command = self.commands.get(robot)
+        if robot in self.lost or command is None:
+            if robot not in self.lost:
                 self.missing += 1
-                self.plant.command(robot, (0.0, 0.0))
-                continue
-            if robot in self.silent:
-                self.silent.discard(robot)
-                log.info("robot %d: answering again at t = %.2f s", robot, self.plant.time_s)
-            if command.tick < k:
-                self.late += 1
-            self.plant.command(robot, command.force)
-        self.port.report(self.plant.truth())
-        self.plant.advance()
+            return ZERO
+        if self.clock == "realtime" and k - command.tick > WATCHDOG_TICKS:
+            if robot not in self.silent:
+                self.silent.add(robot)
+                log.warning(
+                    "robot %d: no command for %d ticks at t = %.2f s; zero force until it"
+                    " answers again",
+                    robot,
+                    k - command.tick,
+                    self.plant.time_s,
+                )
+            self.missing += 1
+            return ZERO
+        if robot in self.silent:
+            self.silent.discard(robot)
+            log.info("robot %d: answering again at t = %.2f s", robot, self.plant.time_s)
+        if command.tick < k:
+            self.late += 1
+        return command.force
 
     def _everyone_answered(self) -> bool:
         k = self.plant.tick
@@ -263,10 +270,10 @@ class PlantNode:
             self.publish_status()
             return 0 if self.stop.is_set() else 1  # stopped before the start, or agents missing
         log.info("all %d agents are up; starting", s.n)
-        max_ticks = round(s.run.max_time_s / s.period_s)
+        last_tick = RunEnd.of(s).last_tick
         period = s.period_s / s.run.real_time_factor  # wall-clock seconds per tick
         start = status_at = time.monotonic()
-        while not self.stop.is_set() and self.plant.tick <= max_ticks:
+        while not self.stop.is_set() and self.plant.tick <= last_tick:
             self._publish()
             if self.clock == "lockstep":
                 self._lockstep_wait()

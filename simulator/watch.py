@@ -34,7 +34,8 @@ from agent.platform.zenoh_session import ZenohSettings, open_session
 
 if TYPE_CHECKING:  # (the command line reads this module's defaults: it stays light)
     from simulator.inprocess import RunOutcome
-    from simulator.launcher import Collector, Progress, Verdict
+    from simulator.launcher import Collector, Progress
+    from simulator.lockstep import Verdict
     from simulator.scenario import Scenario
 
 START_TIMEOUT_S = 60.0
@@ -94,10 +95,11 @@ def _follow(
     every_s: float,
 ) -> Verdict:
     """Drain the collector until the run is over; the verdict."""
-    from simulator.launcher import AGENTS_NOT_UP, INTERRUPTED, STALLED, Verdict
+    from simulator.launcher import AGENTS_NOT_UP, STALLED
+    from simulator.lockstep import INTERRUPTED, RunEnd, Verdict, halted
 
     began = time.perf_counter()
-    max_ticks = round(scenario.run.max_time_s / scenario.period_s)
+    end = RunEnd.of(scenario)
     next_report = every_s
     while not collector.finished():
         if stop.is_set():
@@ -119,17 +121,12 @@ def _follow(
             return Verdict(
                 STALLED, f"no new truth from the plant for {stall_s:g} s after t = {t:.2f} s"
             )
-        if collector.latest_tick >= max_ticks and collector.done_instant is None:
-            max_time = scenario.run.max_time_s
-            return Verdict(
-                f"out of simulated time (run.max_time_s = {max_time:g} s)",
-                f"the team was not done after the scenario's {max_time:g} s",
-            )
+        if end.out_of_time(collector.latest_tick) and collector.done_instant is None:
+            return end.out_of_time_verdict()
     if collector.halted:
-        lost = sorted(collector.lost)
         detail = (
             f"the team halted at t = {collector.halted_tick * scenario.period_s:.2f} s and did"
             f" not begin again within {collector.rejoin_s:g} s"
         )
-        return Verdict(f"robot(s) {lost} lost" if lost else "team halted", detail)
+        return halted(collector.lost, detail)
     return Verdict()

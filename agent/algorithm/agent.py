@@ -70,6 +70,12 @@ class Agent:
         return self.phase_machine.barrier.phase
 
     @property
+    def phase_since(self) -> int:
+        """The tick at which this robot entered its phase, in the run's ticks (as its
+        :meth:`estimates` say)."""
+        return self.phase_machine.since + self.origin
+
+    @property
     def load_changes(self) -> int:
         """How many times the team has restarted for a changed load."""
         return self.phase_machine.barrier.load_changes

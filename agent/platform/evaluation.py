@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from typing import Protocol
 
 from agent.platform.geometry import Vec2
 from agent.platform.protocol import Estimates, Phase, Truth
@@ -39,7 +40,18 @@ metres, ``omega_rad_s`` is ``|ω̂ − ω|``. The first five are those the proje
 aims bound."""
 
 
-def final_instant(latest: Sequence[Estimates | None], end_tick: int = 0) -> int | None:
+class InPhase(Protocol):
+    """A robot's phase and the tick it entered it, as its latest
+    :class:`~agent.platform.protocol.Estimates` say (or, in one process, its agent)."""
+
+    @property
+    def phase(self) -> Phase: ...
+
+    @property
+    def phase_since(self) -> int: ...
+
+
+def final_instant(latest: Sequence[InPhase | None], end_tick: int = 0) -> int | None:
     """The instant a run's estimates are evaluated at: the first at which every robot was
     done, ``t_f = max(end_tick, max_i phase_since_i)`` over each robot's latest estimates
     (``latest``: one entry per robot of the team), not before the scenario's ``end_tick`` (its

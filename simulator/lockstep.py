@@ -1,0 +1,167 @@
+"""The lockstep tick and the run's end, defined once for the run in one process
+(:func:`~simulator.inprocess.run_inprocess`) and for the run over processes (the plant process,
+:class:`~simulator.node.PlantNode`; the launcher, :mod:`simulator.launcher`; ``heft watch``):
+a lockstep run over Zenoh is the in-process run, estimate for estimate and instant for instant.
+
+Tick ``k`` (:class:`PlantTicks`):
+
+1. the plant is sampled at ``t_k``: every robot's measurement (:meth:`PlantTicks.measure`);
+2. every robot's agent steps on its measurement and its neighbours' shares of tick ``k − 1``
+   (:meth:`~agent.algorithm.agent.Agent.step`) and answers with its force for
+   ``[t_k, t_{k+1})``: in one process at once; over processes the plant waits until every
+   live robot's command of tick ``k`` is in;
+3. the forces are held (:meth:`PlantTicks.apply`; a robot without one, lost or silent, gets
+   zero), the truth of ``t_k`` is read when it is wanted (the plant has not moved since it was
+   sampled), and the plant advances one sensor period.
+
+On the AGVs' CAN buses the link clamps and quantises every measurement and command it carries:
+the plant process has the buses themselves (:class:`~simulator.can_drivers.CanDriversPort`),
+the run in one process their stand-in as the ``link`` of :class:`PlantTicks`
+(:class:`~simulator.can_drivers.CanQuantiser`).
+
+The run's end (:class:`RunEnd`), decided on the team's state, never on message timing:
+
+- *done*: every robot is done, and the scenario's ``end_tick`` (its load changes and hold) has
+  come: the final instant is ``t_f = max(end_tick, max_i phase_since_i)``
+  (:func:`~agent.platform.evaluation.final_instant`), and the run is over at tick ``t_f``,
+  converged;
+- *halted*: every robot halted (one robot's halt reaches the whole team: it is the highest
+  phase): over, not converged;
+- *out of simulated time*: tick ``k`` is the scenario's last (``run.max_time_s``), the team
+  not done: over, not converged.
+
+The run is judged at the first instant, from the one it is over at, whose estimates every robot
+has given: in one process within :data:`ALIGN_TICKS` more ticks (an agent may lag behind a
+late or lost message); over processes the launcher waits for it a grace of wall time
+(:data:`~simulator.launcher.FINAL_GRACE_S`). The plant process stops after the last tick, so
+a run over processes out of simulated time is judged at the newest such instant before it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+from agent.platform.evaluation import InPhase, final_instant
+from agent.platform.geometry import Vec2
+from agent.platform.protocol import Measurement, Phase, Truth
+from simulator.plant import Plant
+
+if TYPE_CHECKING:
+    from simulator.scenario import Scenario
+
+ALIGN_TICKS = 64
+"""Ticks a run in one process steps on, past the tick it is over at, for every agent's
+estimates to refer to the same instant."""
+INTERRUPTED = "interrupted"
+TEAM_HALTED = "team halted"
+
+
+class Link(Protocol):
+    """What the robots' link does to the values it carries (the CAN buses' clamps and
+    quantisation: :class:`~simulator.can_drivers.CanQuantiser`)."""
+
+    def measurement(self, m: Measurement) -> Measurement:
+        """``m`` as the robot's agent gets it."""
+        ...
+
+    def force(self, force: Vec2) -> Vec2:
+        """A commanded force as the robot's drive gets it."""
+        ...
+
+
+class PlantTicks:
+    """The plant of ``scenario``, tick by tick (see the module docstring); ``link`` (if given)
+    stands for what carries the values between the robots and their agents."""
+
+    def __init__(self, scenario: Scenario, link: Link | None = None):
+        self.plant = Plant(scenario)
+        self.link = link
+
+    @property
+    def tick(self) -> int:
+        """``k``: the tick the plant is at."""
+        return self.plant.tick
+
+    @property
+    def time_s(self) -> float:
+        """``t_k``."""
+        return self.plant.time_s
+
+    def measure(self) -> list[Measurement]:
+        """Step 1: every robot's measurement of tick ``k``, robot 1 first, as its agent gets
+        it."""
+        measurements = self.plant.measure()
+        if self.link is not None:
+            measurements = [self.link.measurement(m) for m in measurements]
+        return measurements
+
+    def apply(self, forces: Sequence[Vec2], truth: bool = True) -> Truth | None:
+        """Step 3: robot ``i`` holds ``forces[i − 1]`` (as it gets it) over ``[t_k, t_{k+1})``;
+        the plant advances to ``t_{k+1}``. Returns the truth of ``t_k`` (``None`` unless
+        ``truth``)."""
+        link, plant = self.link, self.plant
+        for robot, force in enumerate(forces, start=1):
+            plant.command(robot, force if link is None else link.force(force))
+        now = plant.truth() if truth else None
+        plant.advance()
+        return now
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Why a run ended: ``reason`` is short and machine-readable (``""``: converged), ``detail``
+    a sentence for people."""
+
+    reason: str = ""
+    detail: str = ""
+
+
+def halted(lost: Iterable[int], detail: str) -> Verdict:
+    """The verdict of a team that halted: the robots ``lost`` named (``n`` is fixed: estimates
+    without one of them would be wrong), or only that it halted."""
+    robots = sorted(lost)
+    return Verdict(f"robot(s) {robots} lost" if robots else TEAM_HALTED, detail)
+
+
+@dataclass(frozen=True)
+class RunEnd:
+    """When a run of a scenario is over (see the module docstring)."""
+
+    end_tick: int
+    """The earliest final instant: :attr:`~simulator.scenario.Scenario.end_tick`."""
+    last_tick: int
+    """The scenario's last tick, ``run.max_time_s / period_s``: the plant process stops after
+    it."""
+    period_s: float
+    max_time_s: float
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> RunEnd:
+        period_s, max_time_s = scenario.period_s, scenario.run.max_time_s
+        return cls(scenario.end_tick, round(max_time_s / period_s), period_s, max_time_s)
+
+    def out_of_time(self, tick: int) -> bool:
+        """Whether a team not done at ``tick`` is out of simulated time."""
+        return tick >= self.last_tick
+
+    def out_of_time_verdict(self) -> Verdict:
+        return Verdict(
+            f"out of simulated time (run.max_time_s = {self.max_time_s:g} s)",
+            f"the team was not done after the scenario's {self.max_time_s:g} s",
+        )
+
+    def over(self, tick: int, team: Sequence[InPhase]) -> Verdict | None:
+        """The verdict if the run is over at ``tick``, the robots of ``team`` stepped (their
+        phases); ``None`` while it goes on."""
+        phase = min(robot.phase for robot in team)
+        if phase == Phase.HALTED:
+            return halted((), f"the team halted at t = {tick * self.period_s:.2f} s simulated")
+        if phase == Phase.DONE:
+            done = final_instant(team, self.end_tick)
+            if done is not None and tick >= done:
+                return Verdict()
+        if self.out_of_time(tick):
+            return self.out_of_time_verdict()
+        return None
