@@ -4,16 +4,15 @@ light, in fresh interpreters: tests/integration/test_import_weight.py.)"""
 
 from __future__ import annotations
 
-import argparse
 import ast
 import re
 import tomllib
-from importlib import metadata
 from pathlib import Path
 
 import pytest
 
 from agent.platform.dispatch import GROUP, main
+from tests.helpers.commands import registered_commands
 from tests.helpers.paths import ROOT
 
 PRODUCT_PACKAGES = ("agent", "simulator", "bridge", "dashboard")
@@ -143,16 +142,6 @@ def test_no_import_cycle_between_the_products_modules() -> None:
 
 
 # ------------------------------------------------------------------------------ heft --help
-def registered_commands() -> set[str]:
-    """The commands the packages of the entry-point group register."""
-    names: set[str] = set()
-    for entry in metadata.entry_points(group=GROUP):
-        commands = argparse.ArgumentParser().add_subparsers()
-        entry.load()(commands)
-        names.update(commands.choices)
-    return names
-
-
 def test_heft_help_lists_every_registered_command_on_one_line(capsys, monkeypatch) -> None:
     monkeypatch.setenv("COLUMNS", "80")
     registered = registered_commands()
