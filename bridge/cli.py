@@ -73,7 +73,7 @@ def _add_bridge(commands: argparse._SubParsersAction) -> None:
             "ForceCommand frames. Its agent cannot tell it from the simulated plant. No valid\n"
             "command for [can] watchdog_ms: it commands zero force until commands return.\n"
             "Bad frames are counted and logged, never fatal; a bus that fails is reopened.\n"
-            "It publishes its counters (BridgeStatus) ten times a second.\n\n"
+            "It publishes its counters (BridgeStatus) four times a second.\n\n"
             "The config is the robot's robot.toml (as heft agent reads it) with a [can]\n"
             "table; the bridge is a Zenoh client of its [zenoh] connect endpoints.\n\n"
             "Exit status: 0 stopped by SIGINT/SIGTERM/SIGHUP, 2 bad config or arguments\n"

@@ -9,7 +9,7 @@
 (Its benchmarks, ``heft bench accuracy|generated|zenoh|noise|sweep|changes``, are in
 :mod:`simulator.bench.cli`.)
 
-Exit status (the README's table): 0 success (``run``: every robot converged), 1 ``run`` did
+Exit status (docs/cli.md): 0 success (``run``: every robot converged), 1 ``run`` did
 not converge (the last line and the results' ``reason`` say why), 2 bad input (a one-line
 ``heft: error: ...`` on stderr), 130 interrupted (SIGINT, SIGTERM or SIGHUP).
 
@@ -210,7 +210,7 @@ def _after_the_run(args: argparse.Namespace, companion, stop: threading.Event) -
 
 
 def _say_verdict(reason: str, detail: str, out: Path | None, recorded: bool) -> int:
-    """The verdict as the last line on stderr; the exit status (README: exit status)."""
+    """The verdict as the last line on stderr; the exit status (docs/cli.md: Exit status)."""
     if not reason:
         return 0
     if reason == INTERRUPTED:

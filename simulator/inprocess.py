@@ -61,7 +61,7 @@ class RunOutcome:
     """What the transport reported (the Zenoh run: the plant's counters and latencies)."""
     reason: str = ""
     """Why the run did not converge (``""`` when it did), short and machine-readable: out of
-    simulated time, a robot lost, a process lost, interrupted (see the README's exit status)."""
+    simulated time, a robot lost, a process lost, interrupted (see docs/cli.md: Exit status)."""
     detail: str = ""
     """The same for people: one sentence (``""`` when it converged)."""
 

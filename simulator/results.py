@@ -292,7 +292,7 @@ def team_phases(outcome: RunOutcome) -> dict[str, float]:
 
 # ------------------------------------------------------------------------------ the document
 def results_dict(outcome: RunOutcome) -> dict[str, Any]:
-    """The results JSON of a run (see the module docstring and the README)."""
+    """The results JSON of a run (see the module docstring and docs/results.md)."""
     period = outcome.scenario.period_s
     robots = {
         str(i): _robot_dict(outcome.final.estimates.get(i), period)

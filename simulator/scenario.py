@@ -24,7 +24,8 @@ A scenario is a TOML file (``simulator/scenarios/paper.toml`` is the paper's Sec
 :func:`load_scenario` reads a file and :func:`parse_scenario` a table already decoded; both
 return a validated, frozen :class:`Scenario` or raise :class:`ScenarioError`, whose one-line
 message names the offending key. Every value has a range, declared next to its field
-(:func:`agent.platform.config.bounded`) or as a constant below, and listed in the README ("Limits").
+(:func:`agent.platform.config.bounded`) or as a constant below, and listed in
+docs/configuration.md ("Limits").
 :func:`scenario_to_toml` writes a scenario back.
 Tables are turned into dataclasses by :func:`agent.platform.config.from_table`.
 """

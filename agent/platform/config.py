@@ -367,7 +367,8 @@ MAX_SEED = 2**63 - 1
 
 
 def _number(value: float) -> str:
-    """A bound as messages and the README write it: 3600, 0.1, 1e-08, 6.28319, 2**63 - 1."""
+    """A bound as messages and docs/configuration.md write it: 3600, 0.1, 1e-08, 6.28319,
+    2**63 - 1."""
     if value == MAX_SEED:
         return "2**63 - 1"
     if isinstance(value, int) or (float(value).is_integer() and abs(value) < 1e16):
@@ -390,8 +391,9 @@ class Bound:
     min_ticks: float = 0.0
 
     def text(self, low: float | None = None) -> str:
-        """The range as messages and the README write it: ``(0, 1000] N``, ``[1 tick, 60] s``,
-        ``0 (off) or [10 ticks, 3600] s``; ``low``, if given, replaces the lower end."""
+        """The range as messages and docs/configuration.md write it: ``(0, 1000] N``,
+        ``[1 tick, 60] s``, ``0 (off) or [10 ticks, 3600] s``; ``low``, if given, replaces the
+        lower end."""
         if low is not None:
             start = f"[{_number(low)}"
         elif self.min_ticks:

@@ -1,3 +1,4 @@
 """What several test modules share, whatever their level (no test module imports another):
 paths, the accuracy checks of a run against the ground truth, processes, fakes of a Zenoh
-session's parts, TLS placeholders, bad input files, and frames and messages to refuse."""
+session's parts, TLS placeholders, bad input files, frames and messages to refuse, and ``heft``
+command lines as the docs and units write them."""

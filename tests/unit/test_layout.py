@@ -4,16 +4,15 @@ light, in fresh interpreters: tests/integration/test_import_weight.py.)"""
 
 from __future__ import annotations
 
-import argparse
 import ast
 import re
 import tomllib
-from importlib import metadata
 from pathlib import Path
 
 import pytest
 
 from agent.platform.dispatch import BENCH_GROUP, GROUP, main
+from tests.helpers.commands import registered
 from tests.helpers.paths import ROOT
 
 PRODUCT_PACKAGES = ("agent", "simulator", "bridge", "dashboard")
@@ -148,16 +147,6 @@ def test_no_import_cycle_between_the_products_modules() -> None:
 
 
 # ------------------------------------------------------------------------------ heft --help
-def registered(group: str) -> set[str]:
-    """The subcommands the packages of the entry-point group ``group`` register."""
-    names: set[str] = set()
-    for entry in metadata.entry_points(group=group):
-        commands = argparse.ArgumentParser().add_subparsers()
-        entry.load()(commands)
-        names.update(commands.choices)
-    return names
-
-
 def listed(help_text: str, title: str, metavar: str) -> list[str]:
     """The subcommands a help text lists under ``title``, asserting one line each."""
     block = help_text.split(f"\n{title}:\n", 1)[1].split("\n\n", 1)[0].splitlines()

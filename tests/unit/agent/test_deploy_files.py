@@ -18,20 +18,24 @@ drift apart unnoticed:
 
 from __future__ import annotations
 
-import argparse
-import contextlib
-import io
 import json
 import re
-import shlex
 import tomllib
 from pathlib import Path
 
 import pytest
 
 from agent.node import load_agent_config
-from agent.platform.dispatch import build_parser
 from agent.platform.zenoh_session import TLS_FILES, file_endpoints
+from tests.helpers.commands import (
+    assert_options_listed,
+    assert_parses,
+    code_blocks,
+    heft_command_lines,
+    leaf,
+    prose,
+    shell_words,
+)
 from tests.helpers.paths import ROOT
 from tests.helpers.tls import TLS_DIR, loadable_copy
 
@@ -101,107 +105,6 @@ def service(path: Path) -> dict[str, list[str]]:
 def last(values: dict[str, list[str]], key: str) -> str | None:
     """The value systemd uses for a single-valued key (the last one given)."""
     return values[key][-1] if key in values else None
-
-
-def split_commands(words: list[str]) -> list[list[str]]:
-    """``words`` of a shell line cut at ``&&``, ``||``, ``;``, ``|``, each command without a
-    leading ``sudo`` (and its options) or environment assignments."""
-    commands, current = [], []
-    for word in [*words, ";"]:
-        if word in ("&&", "||", ";", "|", "&"):
-            if current:
-                commands.append(current)
-            current = []
-        else:
-            current.append(word)
-    stripped = []
-    for command in commands:
-        while command and re.match(r"^[A-Za-z_][A-Za-z0-9_]*=", command[0]):
-            command = command[1:]
-        if command and command[0] == "sudo":
-            command = command[1:]
-            while command and command[0].startswith("-"):
-                command = command[2:] if command[0] in ("-u", "-g") else command[1:]
-        stripped.append(command)
-    return stripped
-
-
-def shell_words(line: str) -> list[str]:
-    lexer = shlex.shlex(line, posix=True, punctuation_chars=";&|")
-    lexer.whitespace_split = True
-    lexer.commenters = "#"
-    return list(lexer)
-
-
-def heft_command_lines(text: str) -> list[list[str]]:
-    """The arguments of every ``heft`` (or ``/opt/heft/.venv/bin/heft``) command in shell
-    text or ``ExecStart=`` lines (backslash continuations joined)."""
-    found = []
-    for line in re.sub(r"\\\n", " ", text).splitlines():
-        line = re.sub(r"^\s*ExecStart=[-@:+!]*", "", line)
-        for command in split_commands(shell_words(line)):
-            if command and Path(command[0]).name == "heft":
-                found.append(command[1:])
-    return found
-
-
-def code_blocks(markdown: str) -> list[str]:
-    return re.findall(r"^```[a-z0-9]*\n(.*?)^```", markdown, flags=re.S | re.M)
-
-
-def prose(markdown: str) -> str:
-    return re.sub(r"^```[a-z0-9]*\n.*?^```", "", markdown, flags=re.S | re.M)
-
-
-@pytest.fixture(scope="module")
-def heft() -> argparse.ArgumentParser:
-    return build_parser()
-
-
-def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return dict(action.choices)
-    return {}
-
-
-def leaf(heft: argparse.ArgumentParser, argv: list[str]) -> tuple[str, argparse.ArgumentParser]:
-    """The (sub)subcommand ``argv`` names, as ``"deploy certs"``, and its parser."""
-    commands = subcommands(heft)
-    assert argv and argv[0] in commands, f"heft {' '.join(argv)}: no such command"
-    name, parser = argv[0], commands[argv[0]]
-    nested = subcommands(parser)
-    if nested:
-        assert len(argv) > 1 and argv[1] in nested, f"heft {' '.join(argv)}: no such command"
-        name, parser = f"{name} {argv[1]}", nested[argv[1]]
-    return name, parser
-
-
-def assert_options_listed(heft, argv: list[str], where: str) -> None:
-    """Every option in ``argv`` is written out in its command's ``--help`` (no abbreviation,
-    nothing the help does not list)."""
-    name, parser = leaf(heft, argv)
-    text = parser.format_help()
-    for word in argv:
-        if word == "--":
-            break
-        if word.startswith("-") and len(word) > 1:
-            option = word.split("=", 1)[0]
-            listed = re.search(rf"(?<![\w-]){re.escape(option)}(?![\w-])", text)
-            assert listed, f"{where}: heft {name} has no option {option}: {' '.join(argv)}"
-
-
-def assert_parses(heft, argv: list[str], where: str) -> argparse.Namespace:
-    """``heft ARGV`` is a complete, valid command line (as argparse would run it)."""
-    assert_options_listed(heft, argv, where)
-    err = io.StringIO()
-    try:
-        with contextlib.redirect_stderr(err):
-            args = heft.parse_args(argv)
-    except SystemExit:
-        pytest.fail(f"{where}: heft {' '.join(argv)}: {err.getvalue().strip()}")
-    assert getattr(args, "handler", None) is not None, f"{where}: heft {' '.join(argv)}"
-    return args
 
 
 def exit_statuses(heft, command: str) -> dict[int, str]:

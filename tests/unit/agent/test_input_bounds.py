@@ -4,8 +4,8 @@ Values that once gave tracebacks or hangs (a memory of 1e-300 s, a window of 1e3
 physics steps a second, a sensor at 1e-9 Hz, a start timeout of NaN, a team of 200, a port of
 99999) get exit status 2 and one ``heft: error:`` line naming the key and its range. Every
 declared range (:func:`agent.platform.config.bounded`) is tested at both ends: a value just
-inside is accepted, one just outside refused with the key named; and the README's "Limits"
-section lists each of them. A busy port or no router (exit status 4) is in
+inside is accepted, one just outside refused with the key named; and the "Limits" section of
+docs/configuration.md lists each of them. A busy port or no router (exit status 4) is in
 tests/integration/test_endpoint_errors.py; the probes as ``heft`` processes in
 tests/integration/test_heft_processes.py."""
 
@@ -25,6 +25,7 @@ from agent.node import AgentNodeConfig, load_agent_config
 from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds
 from agent.platform.dispatch import main
 from agent.platform.zenoh_session import ZenohSettings
+from bridge.config import CanSettings
 from simulator.scenario import (
     MAX_COORDINATE,
     MAX_POSITION,
@@ -32,6 +33,7 @@ from simulator.scenario import (
     MIN_DIAMETER,
     Actuators,
     Floor,
+    LoadChange,
     RunSettings,
     Sensors,
     _BodyTable,
@@ -411,10 +413,10 @@ def test_a_team_of_thirty_two_is_accepted(tmp_path) -> None:
     assert load_scenario(scenario_file(tmp_path, values)).n == MAX_ROBOTS
 
 
-# ------------------------------------------------------------------------------ the README
-def _readme_limits() -> str:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    start = text.index("## Limits")
+# ------------------------------------------------------------------------------ the docs
+def _documented_limits() -> str:
+    text = (ROOT / "docs" / "configuration.md").read_text(encoding="utf-8")
+    start = text.index("\n## Limits\n")
     end = text.find("\n## ", start + 1)
     return text[start : end if end > 0 else None]
 
@@ -427,14 +429,39 @@ def _readme_limits() -> str:
         ("actuators", Actuators),
         ("floor", Floor),
         ("run", RunSettings),
+        ("events", LoadChange),
         ("agent", AgentTuning),
+        ("agent.paper", PaperTuning),
+        ("agent.robust", RobustTuning),
         ("robot.toml", AgentNodeConfig),
         ("zenoh", ZenohSettings),
+        ("can", CanSettings),
     ],
 )
-def test_the_readme_lists_every_range(table, cls) -> None:
-    limits = _readme_limits()
+def test_the_docs_list_every_range(table, cls) -> None:
+    """Each declared range is written, as the messages write it, in a row of the Limits
+    section that names its key (``key`` or ``table.key``); the agents' keys in the rows of
+    their own table (``[agent]``, ``[agent.paper]``, ``[agent.robust]``)."""
+    rows = _documented_limits().splitlines()
+    if table.startswith("agent"):
+        rows = _table_rows(rows, table)
     for key, bound in bounds(cls).items():
-        named = re.compile(rf"`({table}\.)?{key}`")
-        rows = [line for line in limits.splitlines() if named.search(line)]
-        assert any(bound.text() in row for row in rows), (table, key, bound.text())
+        named = re.compile(rf"`({re.escape(table)}\.)?{key}`")
+        listed = [row for row in rows if named.search(row)]
+        assert any(bound.text() in row for row in listed), (table, key, bound.text())
+
+
+def test_the_docs_list_each_familys_keys_in_its_table_only() -> None:
+    rows = _documented_limits().splitlines()
+    for table, cls in (("agent.paper", PaperTuning), ("agent.robust", RobustTuning)):
+        for key in bounds(cls):
+            for other in ("agent", "agent.paper", "agent.robust"):
+                named = [row for row in _table_rows(rows, other) if f"`{key}`" in row]
+                assert bool(named) == (other == table), (key, other)
+
+
+def _table_rows(rows: list[str], table: str) -> list[str]:
+    """The body of the Limits table whose header names ``[table]`` first."""
+    head = next(i for i, row in enumerate(rows) if row.startswith(f"| `[{table}]`"))
+    end = next((i for i in range(head + 1, len(rows)) if not rows[i].startswith("|")), len(rows))
+    return rows[head + 2 : end]
