@@ -22,6 +22,7 @@ from agent.platform.command_line import (
     HelpFormatter,
     UsageError,
     add_zenoh_options,
+    check_port,
     check_writable,
     setup_logging,
     zenoh_settings,
@@ -84,8 +85,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
             f"--host {args.host}: listening beyond this machine needs a token (--token or"
             f" {TOKEN_ENV})"
         )
-    if not 0 <= args.port <= 65535:
-        raise UsageError(f"--port: expected 0 to 65535, got {args.port}")
+    check_port("--port", args.port)
     geometry = _geometry(args.scenario)
     if args.replay is None and args.team is None:
         raise UsageError("--team: needed to watch a live team (or give --replay FILE)")

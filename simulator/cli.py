@@ -38,6 +38,7 @@ from agent.platform.command_line import (
     HelpFormatter,
     UsageError,
     add_zenoh_options,
+    check_port,
     check_writable,
     setup_logging,
     write_text,
@@ -168,6 +169,8 @@ def _companion(args: argparse.Namespace, scenario: Scenario):
     """The run's recording (over Zenoh, unless ``--no-record``) and, for ``heft demo``, its
     dashboard, served from now on; None when there is neither."""
     dashboard = getattr(args, "dashboard", False)
+    if args.dashboard_port is not None:
+        check_port("--dashboard-port", args.dashboard_port)
     record = None
     if args.transport == "zenoh" and not args.no_record:
         from dashboard.companion import default_recording

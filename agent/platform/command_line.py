@@ -67,6 +67,12 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 
 # ------------------------------------------------------------------------------ output files
+def check_port(option: str, port: int) -> None:
+    """A TCP port to listen on: 0 (any free one) to 65535, else a :class:`UsageError`."""
+    if not 0 <= port <= 65535:
+        raise UsageError(f"{option}: expected 0 to 65535, got {port}")
+
+
 def check_writable(path: Path, directory: bool = False) -> None:
     """Fail before a run, not after it, when its output cannot be written. Creates the folder
     if needed, never the file: a temporary file is created in the folder and removed, so a run

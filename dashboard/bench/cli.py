@@ -10,10 +10,15 @@ imports what it runs.
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import os
 import tempfile
 from pathlib import Path
 
-from agent.platform.command_line import HelpFormatter
+from agent.platform.command_line import HelpFormatter, UsageError
+
+CHROMIUM = "/usr/bin/chromium"
+"""The browser the benchmark's pages run in (Debian's ``chromium`` package)."""
 
 
 def register(benchmarks: argparse._SubParsersAction) -> None:
@@ -38,6 +43,9 @@ def register(benchmarks: argparse._SubParsersAction) -> None:
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
     """``heft bench dashboard``: 16 robots at 100 Hz, 3 browsers, then a 10x replay."""
+    problem = missing_browser()
+    if problem is not None:
+        raise UsageError(f"bench dashboard needs {problem}")
     from agent.platform.goals import conclude
     from dashboard.bench.streaming import GOALS, BenchSettings, run
 
@@ -45,3 +53,14 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
         report = run(BenchSettings(), Path(folder))
     print("\n".join(report.lines()))
     return conclude(GOALS, report.figures())
+
+
+def missing_browser() -> str | None:
+    """What the benchmark's pages lack to run (``None``: nothing): Playwright, installed with
+    the test extras (``pip install -e '.[test]'``, as ``make`` does), and Chromium at
+    :data:`CHROMIUM`."""
+    if importlib.util.find_spec("playwright") is None:
+        return "Playwright: pip install -e '.[test]' (make does)"
+    if not os.access(CHROMIUM, os.X_OK):
+        return f"Chromium at {CHROMIUM}: apt-get install chromium"
+    return None

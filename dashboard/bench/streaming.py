@@ -33,8 +33,8 @@ from agent.platform.goals import Goal, Sense
 from agent.platform.protocol import Estimates, Keys, Phase, Truth, encode
 from agent.platform.statistics import percentile
 from agent.platform.zenoh_session import ZenohSettings, open_session
+from dashboard.bench.cli import CHROMIUM
 
-CHROMIUM = "/usr/bin/chromium"
 BROWSER_ARGS = ["--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-sync"]
 GOALS = (
     Goal("cpu_pct", "dashboard CPU, share of one core", 25.0, Sense.BELOW, "%"),

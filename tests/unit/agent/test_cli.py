@@ -124,6 +124,14 @@ def test_bad_scenario_exits_two_with_one_line(tmp_path: Path) -> None:
         assert ran.stdout == "", case
 
 
+@pytest.mark.parametrize("port", ["70000", "-1"])
+def test_demo_refuses_a_dashboard_port_out_of_range_before_it_starts(port: str) -> None:
+    ran = invoke("demo", "--dashboard-port", port, "--no-wait")
+    assert ran.code == 2
+    assert ran.stderr == f"heft: error: --dashboard-port: expected 0 to 65535, got {port}\n"
+    assert ran.stdout == ""
+
+
 def test_help_works_for_every_command(capsys: pytest.CaptureFixture[str]) -> None:
     commands = (["run"], ["scenario"], ["scenario", "generate"], ["bench"], ["demo"], ["sim"])
     commands += tuple(["bench", name] for name in ("accuracy", "noise", "can", "dashboard"))

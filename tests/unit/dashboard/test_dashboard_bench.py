@@ -11,6 +11,7 @@ import pytest
 
 from agent.platform.dispatch import main
 from agent.platform.goals import judge
+from dashboard.bench import cli as bench_cli
 from dashboard.bench import streaming
 from dashboard.bench.streaming import (
     GOALS,
@@ -81,9 +82,25 @@ def test_bench_dashboard_exits_with_its_goals_verdict(monkeypatch, capsys, cpu_p
         return measured(cpu_pct=cpu_pct)
 
     monkeypatch.setattr(streaming, "run", run)
+    monkeypatch.setattr(bench_cli, "missing_browser", lambda: None)
     assert main(["bench", "dashboard"]) == status
     out = capsys.readouterr().out
     assert out.startswith("dashboard benchmark: 16 robots' estimates at 100 Hz")
     assert f"dashboard CPU: {cpu_pct:.1f} % of one core for 1600 messages/s" in out
     verdict = "met" if status == 0 else "NOT met"
     assert f"(below 25 %): {verdict}" in out and out.endswith(f"goals: {verdict}\n")
+
+
+def test_bench_dashboard_without_a_browser_says_what_is_missing(monkeypatch, capsys) -> None:
+    def run(settings: BenchSettings, folder: Path) -> BenchReport:
+        raise AssertionError("no benchmark without its browser")
+
+    monkeypatch.setattr(streaming, "run", run)
+    monkeypatch.setattr(bench_cli, "CHROMIUM", "/nonexistent/chromium")
+    assert main(["bench", "dashboard"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err == (
+        "heft: error: bench dashboard needs Chromium at /nonexistent/chromium:"
+        " apt-get install chromium\n"
+    )
