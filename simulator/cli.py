@@ -186,9 +186,7 @@ def _companion(args: argparse.Namespace, scenario: Scenario):
     from dashboard.server import ServeError
 
     try:
-        return RunCompanion.open(
-            scenario, record, dashboard, port=args.dashboard_port, stream=sys.stdout
-        )
+        return RunCompanion.open(record, dashboard, port=args.dashboard_port, stream=sys.stdout)
     except ServeError as err:  # a busy port: exit status 4, as an unreachable router
         raise SessionError(str(err)) from None
 

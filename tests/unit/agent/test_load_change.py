@@ -14,7 +14,6 @@ import pytest
 from agent.algorithm.coordination import PhaseBarrier
 from agent.algorithm.robust.load_change import ProbeFit
 from agent.platform.protocol import Barrier, Phase, Share, decode, encode
-from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
 from simulator.inprocess import run_inprocess
 from simulator.plant import Plant
@@ -232,7 +231,7 @@ def test_a_changed_load_is_noticed_within_5_s_and_estimated_again(seed, change) 
     assert results_dict(outcome)["floor"]["within"]
     assert "restarted" in format_table(outcome)
     # The dashboard, fed the run, ends on the same final instant: the one after the restart.
-    state = TeamState("changing", LoadGeometry.from_scenario(outcome.scenario))
+    state = TeamState("changing", outcome.scenario.load_geometry())
     for sample in [*outcome.history, outcome.final]:
         state.ingest(sample.truth, sample.truth.time_s)
         for est in sample.estimates.values():

@@ -11,7 +11,6 @@ import pytest
 from agent.algorithm.coordination import PhaseBarrier
 from agent.platform.protocol import Barrier, Phase, Share, decode, encode
 from agent.platform.transport import InMemoryTransport
-from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
 from simulator.inprocess import make_agents
 from simulator.plant import Plant
@@ -150,7 +149,7 @@ def test_agents_halted_mid_run_begin_again_and_estimate_the_load_as_well() -> No
         c = truth.contact_to_com[a.robot - 1]
         assert abs(est.contact_to_com[0] - c[0]) < 2e-3 and abs(est.contact_to_com[1] - c[1]) < 2e-3
     # The dashboard's table says the team began again.
-    state = TeamState("rejoin", LoadGeometry.from_scenario(scenario))
+    state = TeamState("rejoin", scenario.load_geometry())
     state.ingest(truth, truth.time_s)
     for a in agents:
         state.ingest(a.estimates(), truth.time_s)
