@@ -54,7 +54,7 @@ from agent.platform.config import (
     read_toml,
 )
 from agent.platform.faults import FaultSettings, FaultyTransport
-from agent.platform.process import RejectLog, stop_on_signals
+from agent.platform.process import RejectLog, StopSignals
 from agent.platform.protocol import (
     CLOCKS,
     Command,
@@ -407,6 +407,6 @@ def zenoh_agent_node(config: AgentNodeConfig, session, stop: threading.Event | N
 def run_agent(config: AgentNodeConfig, stop: threading.Event | None = None) -> int:
     """Run the agent of ``config`` on Zenoh until stopped (a control message, or SIGINT,
     SIGTERM or SIGHUP)."""
-    stop = stop or stop_on_signals()
+    stop = stop or StopSignals().handle().event
     with open_session(config.zenoh) as session, zenoh_agent_node(config, session, stop) as node:
         return node.run()

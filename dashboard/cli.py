@@ -75,7 +75,7 @@ def _speed(value: str) -> float:
 # ------------------------------------------------------------------------------ heft dashboard
 def cmd_dashboard(args: argparse.Namespace) -> int:
     """``heft dashboard``: serve the page for a live team or a recording until a signal."""
-    from agent.platform.process import stop_on_signals
+    from agent.platform.process import StopSignals
     from dashboard.display import Display
     from dashboard.server import ServeError, is_loopback
 
@@ -119,7 +119,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
         )
     except ServeError as err:
         raise _network_error(str(err)) from None
-    stop = stop_on_signals()
+    stop = StopSignals().handle().event
     try:
         if args.replay is not None:
             display.hub.replay(Path(args.replay), speed=speed, paused=args.paused)
@@ -142,7 +142,7 @@ def _network_error(message: str) -> Exception:
 # ------------------------------------------------------------------------------ heft record
 def cmd_record(args: argparse.Namespace) -> int:
     """``heft record``: write a team's traffic to MCAP until a signal or ``--duration``."""
-    from agent.platform.process import stop_on_signals
+    from agent.platform.process import StopSignals
     from dashboard.display import TeamRecording
 
     keys = _keys(args.team)
@@ -153,7 +153,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     _no_scenario(args)
     settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
     setup_logging(args)
-    stop = stop_on_signals()
+    stop = StopSignals().handle().event
     recording = TeamRecording.open(output, keys.team, settings)
     LOG.info("recording team %r to %s", keys.team, output)
     try:
