@@ -26,10 +26,10 @@ adopted as the clock.
 A neighbour whose liveliness token disappears (killed, or hung past its lease) is lost: the
 agent halts the team (see :mod:`agent.algorithm.phase_machine`) and answers with zero force. When
 every neighbour's token is back (the link is up again, or the robot's agent was restarted), the
-robot is ready to begin again, and once every robot is, the team starts over from Step 1 in a new
-generation (:mod:`agent.algorithm.coordination`): a robot that was away missed its own measurements,
-a restarted one lost all it knew, and the load moved unobserved meanwhile, so nothing estimated
-before the halt is kept.
+robot is ready to begin again, and once every robot is, the team starts over from Step 1, one
+more *rejoin* (:mod:`agent.algorithm.coordination`): a robot that was away missed its own
+measurements, a restarted one lost all it knew, and the load moved unobserved meanwhile, so
+nothing estimated before the halt is kept.
 """
 
 from __future__ import annotations
@@ -190,7 +190,8 @@ class AgentNode:
         self.next_tick = 0
         self.last_phase: Phase | None = None
         self.alarmed = False
-        """Whether this robot's probes have found the load changed (logged once per epoch)."""
+        """Whether this robot's probes have found the load changed (logged once until the team
+        restarts for it: one more load change)."""
         self.last_command: Command | None = None
         self.recent_shares: deque[Share] = deque(maxlen=2)
         self.last_sent = time.monotonic()

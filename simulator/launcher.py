@@ -234,7 +234,7 @@ class Collector:
         self.history: History[Sample] = History()
         self.phase_ticks: dict[str, int] = {}
         self.newest: dict[int, Estimates] = {}
-        """Each robot's newest estimates heard (of the team's newest generation)."""
+        """Each robot's newest estimates heard (since the team's latest rejoin)."""
         self.statuses: dict[int, Status] = {}
         """Each robot's latest status."""
         self.halted = False

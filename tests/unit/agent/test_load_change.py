@@ -182,18 +182,18 @@ def test_one_robot_restarts_the_team_and_every_robot_restarts_at_the_same_tick()
     assert all(b.load_changes == 1 and b.phase == Phase.INERTIA for b in barriers.values())
 
 
-def test_a_later_epoch_is_caught_up_with_and_halted_beats_every_epoch() -> None:
+def test_more_load_changes_are_caught_up_with_and_halted_beats_any_number() -> None:
     b = PhaseBarrier(1, 2, 0)
     b.phase = Phase.DONE
     b.step(10, False, [Barrier(phase=Phase.EXCITE, load_changes=2)])
     assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)
     b.step(11, False, [Barrier(phase=Phase.DONE, load_changes=1)])
-    assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)  # an older epoch is not gone back to
+    assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)  # fewer load changes: not gone back
     b.step(12, False, [Barrier(phase=Phase.HALTED, load_changes=0)])
     assert b.phase == Phase.HALTED
 
 
-def test_the_epoch_crosses_the_wire_and_is_domain_checked() -> None:
+def test_the_load_changes_cross_the_wire_and_are_domain_checked() -> None:
     share = Share(1, 5, (0.0, 0.0), 1, barrier=Barrier(load_changes=7))
     assert decode(Share, encode(share)).barrier.load_changes == 7
     with pytest.raises(ValueError, match="share.barrier.load_changes"):
