@@ -312,14 +312,6 @@ class Scenario:
         """The first tick at or after :attr:`end_s`."""
         return math.ceil(self.end_s / self.period_s - 1e-9)
 
-    def body_at(self, time_s: float) -> Body:
-        """The load after the changes up to ``time_s``."""
-        body = self.body
-        for event in self.events:
-            if event.at_s <= time_s:
-                body = event.applied_to(body)
-        return body
-
     @property
     def n(self) -> int:
         """Number of robots (one per contact)."""

@@ -538,7 +538,6 @@ KINDS: dict[type, int] = {
     LoadGeometry: 11,
 }
 """Every message class and its kind byte."""
-_STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
 
 
 def _finite(*values: float) -> bool:

@@ -173,12 +173,6 @@ class BridgeRig:
             self.check()
             raise RigError(f"the echo agent did not come up in time:\n{agent.tail()}")
 
-    def kill_agent(self) -> None:
-        """``kill -9`` the echo agent, as a crash would end it."""
-        agent = self.children.pop("echo agent")
-        agent.process.kill()
-        agent.stop()
-
     def check(self) -> None:
         """:class:`RigError` if a process of the rig has ended."""
         for child in self.children.values():
