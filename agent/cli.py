@@ -38,14 +38,14 @@ def cmd_agent(args: argparse.Namespace) -> int:
 def cmd_router(args: argparse.Namespace) -> int:
     """``heft router``: run a Zenoh router until a signal. Its session says in the log what
     is in force (endpoints, TLS, access control: :func:`~agent.platform.zenoh_session.describe`)."""
-    from agent.platform.process import stop_on_signals
+    from agent.platform.process import StopSignals
     from agent.platform.zenoh_session import open_session
 
     base = ZenohSettings(mode="router", connect=(), listen=(DEFAULT_ROUTER,))
     settings = zenoh_settings(args, base)
     setup_logging(args)
     log = logging.getLogger("heft.router")
-    stop = stop_on_signals()
+    stop = StopSignals().handle().event
     with open_session(settings):
         stop.wait()
     log.info("router stopped")

@@ -26,10 +26,10 @@ adopted as the clock.
 A neighbour whose liveliness token disappears (killed, or hung past its lease) is lost: the
 agent halts the team (see :mod:`agent.algorithm.phase_machine`) and answers with zero force. When
 every neighbour's token is back (the link is up again, or the robot's agent was restarted), the
-robot is ready to begin again, and once every robot is, the team starts over from Step 1 in a new
-generation (:mod:`agent.algorithm.coordination`): a robot that was away missed its own measurements,
-a restarted one lost all it knew, and the load moved unobserved meanwhile, so nothing estimated
-before the halt is kept.
+robot is ready to begin again, and once every robot is, the team starts over from Step 1, one
+more *rejoin* (:mod:`agent.algorithm.coordination`): a robot that was away missed its own
+measurements, a restarted one lost all it knew, and the load moved unobserved meanwhile, so
+nothing estimated before the halt is kept.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ from agent.platform.config import (
     read_toml,
 )
 from agent.platform.faults import FaultSettings, FaultyTransport
-from agent.platform.process import RejectLog, stop_on_signals
+from agent.platform.process import RejectLog, StopSignals
 from agent.platform.protocol import (
     CLOCKS,
     Command,
@@ -190,7 +190,8 @@ class AgentNode:
         self.next_tick = 0
         self.last_phase: Phase | None = None
         self.alarmed = False
-        """Whether this robot's probes have found the load changed (logged once per epoch)."""
+        """Whether this robot's probes have found the load changed (logged once until the team
+        restarts for it: one more load change)."""
         self.last_command: Command | None = None
         self.recent_shares: deque[Share] = deque(maxlen=2)
         self.last_sent = time.monotonic()
@@ -407,6 +408,6 @@ def zenoh_agent_node(config: AgentNodeConfig, session, stop: threading.Event | N
 def run_agent(config: AgentNodeConfig, stop: threading.Event | None = None) -> int:
     """Run the agent of ``config`` on Zenoh until stopped (a control message, or SIGINT,
     SIGTERM or SIGHUP)."""
-    stop = stop or stop_on_signals()
+    stop = stop or StopSignals().handle().event
     with open_session(config.zenoh) as session, zenoh_agent_node(config, session, stop) as node:
         return node.run()

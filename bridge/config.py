@@ -25,7 +25,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agent.node import AgentNodeConfig
-from agent.platform.config import ConfigError, bounded, check_bounds, from_table, read_toml
+from agent.platform.config import (
+    ConfigError,
+    bounded,
+    check_bounds,
+    from_table,
+    read_toml,
+    toml_fields,
+)
 from agent.platform.zenoh_session import ZenohSettings
 from bridge.dbc import MAX_NODE
 
@@ -93,6 +100,12 @@ class BridgeConfig:
         """The bridge's Zenoh session: a client of the robot's router (see the module
         docstring)."""
         return dataclasses.replace(self.robot.zenoh, mode="client", listen=())
+
+
+def can_table(can: CanSettings) -> str:
+    """``can`` as ``robot.toml``'s ``[can]`` table, every key written (what
+    :func:`load_bridge_config` reads back as ``can``)."""
+    return "\n".join(["", "[can]", *toml_fields(can)]) + "\n"
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:

@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import can
 
-from agent.platform.process import RejectLog, stop_on_signals_taken
+from agent.platform.process import RejectLog, StopSignals
 from agent.platform.protocol import Command, Control, Keys
 from agent.platform.robot_io import Event, Liveliness
 from agent.platform.zenoh_robot_io import ZenohAgentsPort
@@ -303,7 +303,7 @@ def run_bridge(config: BridgeConfig, stop: threading.Event | None = None) -> int
     :class:`BusUnavailable` if its bus cannot be opened at the start."""
     if config.can.realtime_priority:  # before any thread starts: they all inherit it
         use_realtime_priority(config.can.realtime_priority)
-    stop = stop or stop_on_signals_taken()
+    stop = stop or StopSignals().take().event
     robot = config.robot.robot
     rejects = RejectLog(log, f"bridge {robot}")
     with open_session(config.zenoh) as session:

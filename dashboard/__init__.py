@@ -6,13 +6,13 @@ top view of the load; ``heft record`` writes a team's traffic to MCAP, which the
 replays (``heft dashboard --replay FILE``).
 
 Modules, one job each: :mod:`dashboard.channels` (Zenoh keys and protocol messages as the
-recordings' JSON channels), :mod:`dashboard.geometry` (the load's outline and graph, when
-known), :mod:`dashboard.state` (pure aggregation of the messages into what the page shows),
-:mod:`dashboard.feed` (the live Zenoh subscription), :mod:`dashboard.recorder` and
-:mod:`dashboard.replay` (MCAP), :mod:`dashboard.hub` (the state shared by the sources and the
-web app), :mod:`dashboard.app` (the FastAPI app), :mod:`dashboard.server` (uvicorn in a
+recordings' JSON channels), :mod:`dashboard.state` (pure aggregation of the messages into what
+the page shows), :mod:`dashboard.feed` (the live Zenoh subscription), :mod:`dashboard.recorder`
+and :mod:`dashboard.replay` (MCAP), :mod:`dashboard.hub` (the state shared by the sources and
+the web app), :mod:`dashboard.app` (the FastAPI app), :mod:`dashboard.server` (uvicorn in a
 thread), :mod:`dashboard.display` (the page and a recorder as parts of a process),
 :mod:`dashboard.companion` (both beside a run of ``heft run``/``heft demo``),
 :mod:`dashboard.cli` (``heft dashboard``, ``heft record``); its benchmark, ``heft bench
-dashboard``, is :mod:`dashboard.bench`.
+dashboard``, is :mod:`dashboard.bench`. The load's outline and the graph are the plant's
+(:class:`~agent.platform.protocol.LoadGeometry`), heard as the rest of the team's messages.
 """

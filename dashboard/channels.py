@@ -32,6 +32,7 @@ from agent.platform.protocol import (
     DecodeError,
     Estimates,
     Keys,
+    LoadGeometry,
     Measurement,
     PlantStatus,
     Share,
@@ -53,6 +54,7 @@ ROBOT_KINDS: dict[type, Callable[[Keys, int], str]] = {
 TEAM_KINDS: dict[type, Callable[[Keys], str]] = {
     Clock: Keys.clock,
     Truth: Keys.truth,
+    LoadGeometry: Keys.geometry,
     PlantStatus: Keys.plant_status,
     Control: Keys.control,
 }

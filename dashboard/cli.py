@@ -1,11 +1,15 @@
 """The dashboard package's commands::
 
     heft dashboard [--team T] [--connect ENDPOINT] [--host H] [--port P] [--token TOKEN]
-                   [--scenario FILE] [--replay FILE [--speed X] [--paused]]
-    heft record --team T -o FILE [--scenario FILE] [--duration S] [Zenoh options]
+                   [--replay FILE [--speed X] [--paused]]
+    heft record --team T -o FILE [--duration S] [Zenoh options]
 
 Both run until SIGINT, SIGTERM or SIGHUP (exit status 0); bad input is one ``heft: error:``
 line and exit status 2; a busy port or an unreachable router is exit status 4.
+
+The load's outline and the graph come from the plant
+(:class:`~agent.platform.protocol.LoadGeometry`), live or recorded; ``--scenario``, which once
+gave them, is refused with a line that says so.
 
 Building the parser imports nothing of FastAPI, uvicorn or MCAP: the handlers do.
 """
@@ -46,17 +50,13 @@ def _keys(team: str | None, option: str = "--team"):
         raise UsageError(f"{option}: {err}") from None
 
 
-def _geometry(path: str | None):
-    """The load geometry of ``--scenario FILE``, or None."""
-    if path is None:
-        return None
-    from dashboard.geometry import LoadGeometry
-    from simulator.scenario import ScenarioError, load_scenario
-
-    try:
-        return LoadGeometry.from_scenario(load_scenario(path))
-    except ScenarioError as err:
-        raise UsageError(f"--scenario: {err}") from None
+def _no_scenario(args: argparse.Namespace) -> None:
+    """``--scenario`` is no longer taken: say where the outline comes from now."""
+    if args.scenario is not None:
+        raise UsageError(
+            "--scenario: no longer needed: the plant (heft sim, heft run) publishes the load's"
+            " outline and the graph, and a recording keeps them"
+        )
 
 
 def _speed(value: str) -> float:
@@ -75,7 +75,7 @@ def _speed(value: str) -> float:
 # ------------------------------------------------------------------------------ heft dashboard
 def cmd_dashboard(args: argparse.Namespace) -> int:
     """``heft dashboard``: serve the page for a live team or a recording until a signal."""
-    from agent.platform.process import stop_on_signals
+    from agent.platform.process import StopSignals
     from dashboard.display import Display
     from dashboard.server import ServeError, is_loopback
 
@@ -86,7 +86,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
             f" {TOKEN_ENV})"
         )
     check_port("--port", args.port)
-    geometry = _geometry(args.scenario)
+    _no_scenario(args)
     if args.replay is None and args.team is None:
         raise UsageError("--team: needed to watch a live team (or give --replay FILE)")
     speed = 1.0
@@ -113,14 +113,13 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     try:
         display = Display.open(
             team=None if keys is None else keys.team,
-            geometry=geometry,
             host=args.host,
             port=args.port,
             token=token,
         )
     except ServeError as err:
         raise _network_error(str(err)) from None
-    stop = stop_on_signals()
+    stop = StopSignals().handle().event
     try:
         if args.replay is not None:
             display.hub.replay(Path(args.replay), speed=speed, paused=args.paused)
@@ -143,7 +142,7 @@ def _network_error(message: str) -> Exception:
 # ------------------------------------------------------------------------------ heft record
 def cmd_record(args: argparse.Namespace) -> int:
     """``heft record``: write a team's traffic to MCAP until a signal or ``--duration``."""
-    from agent.platform.process import stop_on_signals
+    from agent.platform.process import StopSignals
     from dashboard.display import TeamRecording
 
     keys = _keys(args.team)
@@ -151,11 +150,11 @@ def cmd_record(args: argparse.Namespace) -> int:
     check_writable(output)
     if args.duration is not None and not (0 < args.duration <= 7 * 24 * 3600):
         raise UsageError(f"--duration: expected (0, 604800] s, got {args.duration:g}")
-    geometry = _geometry(args.scenario)
+    _no_scenario(args)
     settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
     setup_logging(args)
-    stop = stop_on_signals()
-    recording = TeamRecording.open(output, keys.team, geometry, settings)
+    stop = StopSignals().handle().event
+    recording = TeamRecording.open(output, keys.team, settings)
     LOG.info("recording team %r to %s", keys.team, output)
     try:
         stop.wait(args.duration)
@@ -182,7 +181,8 @@ def _add_dashboard(commands: argparse._SubParsersAction) -> None:
             "Serve a web page that shows a team live over Zenoh, or a recording replayed:\n"
             "every robot's m and J against the truth, the edges' |z_ij|, the COM offset, the\n"
             "rotation rate, the phase timeline, the communication graph's health, a top view\n"
-            "of the load, alarms and the final table. Prints 'dashboard: URL' once serving.\n\n"
+            "of the load (its outline as the plant publishes it), alarms and the final table.\n"
+            "Prints 'dashboard: URL' once serving.\n\n"
             "It listens on 127.0.0.1 unless told otherwise; any other address needs a token,\n"
             f"given with --token or ${TOKEN_ENV}, on every request (header\n"
             "'Authorization: Bearer TOKEN', or ?token=TOKEN in the URL).\n\n"
@@ -209,11 +209,7 @@ def _add_dashboard(commands: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--token", help=f"required from every client (default: ${TOKEN_ENV}, else none)"
     )
-    parser.add_argument(
-        "--scenario",
-        metavar="FILE",
-        help="the run's scenario TOML: the load's outline and the graph (default: none)",
-    )
+    parser.add_argument("--scenario", help=argparse.SUPPRESS)  # refused: see _no_scenario
     parser.add_argument(
         "--replay", metavar="FILE", help="replay this MCAP recording instead of a live team"
     )
@@ -251,11 +247,7 @@ def _add_record(commands: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "-o", "--output", required=True, metavar="FILE", help="the MCAP file to write (required)"
     )
-    parser.add_argument(
-        "--scenario",
-        metavar="FILE",
-        help="the run's scenario TOML, stored for the replay's top view (default: none)",
-    )
+    parser.add_argument("--scenario", help=argparse.SUPPRESS)  # refused: see _no_scenario
     parser.add_argument(
         "--duration", type=float, metavar="S", help="stop after S seconds (default: at a signal)"
     )

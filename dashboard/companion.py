@@ -19,7 +19,6 @@ from typing import TextIO
 
 from agent.platform.zenoh_session import ZenohSettings
 from dashboard.display import DEFAULT_PORT, Display, TeamRecording
-from dashboard.geometry import LoadGeometry
 
 RECORDINGS = Path("out") / "recordings"
 """Where runs are recorded unless told otherwise."""
@@ -33,8 +32,7 @@ def default_recording(name: str, folder: Path = RECORDINGS) -> Path:
 class RunCompanion:
     """A run's recording (``record``: its file, or None) and dashboard (``dashboard``)."""
 
-    def __init__(self, geometry: LoadGeometry, record: Path | None, display: Display | None):
-        self.geometry = geometry
+    def __init__(self, record: Path | None, display: Display | None):
         self.record = record
         self.display = display
         self.recording: TeamRecording | None = None
@@ -42,7 +40,6 @@ class RunCompanion:
     @classmethod
     def open(
         cls,
-        scenario,
         record: Path | None,
         dashboard: bool,
         host: str = "127.0.0.1",
@@ -51,14 +48,14 @@ class RunCompanion:
         stream: TextIO | None = None,
     ) -> RunCompanion:
         """Serve the dashboard (if ``dashboard``) and print ``dashboard: URL`` to ``stream``;
-        :class:`~dashboard.server.ServeError` if its port is taken."""
-        geometry = LoadGeometry.from_scenario(scenario)
+        :class:`~dashboard.server.ServeError` if its port is taken. The load's outline comes
+        from the run's plant, as the rest of its messages."""
         display = None
         if dashboard:
-            display = Display.open(None, geometry, host, port, token, recording=record)
+            display = Display.open(None, host, port, token, recording=record)
             if stream is not None:
                 print(f"dashboard: {display.url}", file=stream, flush=True)
-        return cls(geometry, record, display)
+        return cls(record, display)
 
     def on_ready(self, router: str, team: str) -> None:
         """The run's router is up at ``router``, its team is ``team``: subscribe (call before
@@ -67,9 +64,7 @@ class RunCompanion:
         settings = ZenohSettings(mode="client", connect=(router,))
         if self.record is not None:  # one subscription for both: each message decoded once
             self.record.parent.mkdir(parents=True, exist_ok=True)
-            self.recording = TeamRecording.open(
-                self.record, team, self.geometry, settings, self.display
-            )
+            self.recording = TeamRecording.open(self.record, team, settings, self.display)
         elif self.display is not None:
             self.display.watch(settings, team)
 

@@ -30,7 +30,6 @@ class Display:
     def open(
         cls,
         team: str | None,
-        geometry=None,
         host: str = "127.0.0.1",
         port: int = DEFAULT_PORT,
         token: str | None = None,
@@ -46,7 +45,7 @@ class Display:
             LOG.warning(
                 "dashboard: the page's charts will not draw: not installed: %s", "; ".join(missing)
             )
-        hub = Hub(team or "", geometry, recording=recording)
+        hub = Hub(team or "", recording=recording)
         server = Server(create_app(hub, AppSettings(token=token)), host, port).start()
         url = server.url if token is None else f"{server.url}?token={token}"
         return cls(hub, server, url)
@@ -84,7 +83,6 @@ class TeamRecording:
         cls,
         path: Path,
         team: str,
-        geometry,
         settings: ZenohSettings,
         display: Display | None = None,
     ) -> TeamRecording:
@@ -99,7 +97,7 @@ class TeamRecording:
         keys = Keys(team)
         session = open_session(settings)
         try:
-            recorder = Recorder(path, team, geometry)
+            recorder = Recorder(path, team)
         except BaseException:
             session.close()
             raise

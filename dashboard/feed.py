@@ -43,14 +43,16 @@ LivelinessSink = Callable[[int, bool, float], None]
 
 def display_keys(keys: Keys) -> list[str]:
     """What a display subscribes to: the estimates, statuses, bridges and commands of every
-    robot, each robot's shares (the links' health), the plant's truth and status, the control
-    key. Not the measurements or the clock, the bulk of a team's traffic."""
+    robot, each robot's shares (the links' health), the plant's truth, load geometry and
+    status, the control key. Not the measurements or the clock, the bulk of a team's
+    traffic."""
     return [
         keys.all_estimates(),
         keys.all_statuses(),
         keys.all_bridges(),
         keys.all_forces(),
         keys.truth(),
+        keys.geometry(),
         keys.plant_status(),
         keys.control(),
         *(keys.share(i) for i in range(1, MAX_ROBOTS + 1)),

@@ -16,16 +16,26 @@ from agent.platform.protocol import (
     Command,
     Control,
     Estimates,
+    LoadGeometry,
     PlantStatus,
     Share,
     Status,
     Truth,
 )
-from dashboard.geometry import LoadGeometry
 from dashboard.replay import Recorded, Recording, Replayer
 from dashboard.state import CAPACITY, TeamState
 
-DISPLAYED = (Estimates, Status, Share, Command, BridgeStatus, Truth, PlantStatus, Control)
+DISPLAYED = (
+    Estimates,
+    Status,
+    Share,
+    Command,
+    BridgeStatus,
+    Truth,
+    LoadGeometry,
+    PlantStatus,
+    Control,
+)
 """What the page shows something of (a replay skips the measurements and the clock)."""
 REPLAY_STEP_S = 0.5
 """Recorded seconds one step lets through (a replay's "step" button)."""
@@ -34,18 +44,11 @@ REPLAY_STEP_S = 0.5
 class Hub:
     """Thread-safe access to the team's state for one source and many pages."""
 
-    def __init__(
-        self,
-        team: str,
-        geometry: LoadGeometry | None = None,
-        capacity: int = CAPACITY,
-        recording: Path | None = None,
-    ):
+    def __init__(self, team: str, capacity: int = CAPACITY, recording: Path | None = None):
         self.team = team
-        self.geometry = geometry
         self.capacity = capacity
         self.lock = threading.Lock()
-        self.state = TeamState(team, geometry, capacity)
+        self.state = TeamState(team, capacity=capacity)
         self.epoch = 1
         self.mode = "live"
         self.recording = recording
@@ -80,13 +83,12 @@ class Hub:
         """Start over from ``path``: a new epoch, the live feed (if any) ignored from now on.
         :class:`~dashboard.replay.RecordingError` if it is not a team's recording."""
         recording = Recording(path)
-        team, geometry = recording.header()
+        team = recording.header()
         self.stop_replay()
         replayer = Replayer(recording, self._replayed, speed=speed, paused=paused, kinds=DISPLAYED)
         with self.lock:
             self.team = team
-            self.geometry = geometry or self.geometry
-            self.state = TeamState(team, self.geometry, self.capacity)
+            self.state = TeamState(team, capacity=self.capacity)
             self.epoch += 1
             self.recording = Path(path)
             self.replayer = replayer

@@ -4,8 +4,8 @@ One MCAP channel per Zenoh key (the topic is the key, e.g. ``heft/paper/robot/2/
 message a JSON object with every field of its protocol message under a JSON schema named
 ``heft.<Class>`` (:mod:`dashboard.channels`), so that Foxglove and PlotJuggler show named
 fields. Every robot's measurements and commands are recorded, not only the estimates: a
-centralized estimator can be run on a recording afterwards. Metadata records name the team
-(``heft.team``) and, when known, the load's geometry (``heft.load``).
+centralized estimator can be run on a recording afterwards, and the plant's load geometry is
+recorded as the rest is. A metadata record names the team (``heft.team``).
 
 A recording stays readable if its process is killed: messages are written in chunks closed
 at least every :data:`FLUSH_EVERY_S` (and whenever a chunk reaches :data:`CHUNK_BYTES`), and
@@ -24,7 +24,6 @@ from pathlib import Path
 from mcap.writer import CompressionType, Writer
 
 from dashboard.channels import MESSAGE_KINDS, json_schema, record_bytes
-from dashboard.geometry import METADATA_NAME, LoadGeometry
 
 FLUSH_EVERY_S = 0.5
 """The longest a recorded message waits in memory before it is in the file."""
@@ -42,7 +41,6 @@ class Recorder:
         self,
         path: str | Path,
         team: str,
-        geometry: LoadGeometry | None = None,
         flush_every_s: float = FLUSH_EVERY_S,
     ):
         self.path = Path(path)
@@ -60,8 +58,6 @@ class Recorder:
         self._flushed_at = time.monotonic()
         self._closed = False
         self._writer.add_metadata(TEAM_METADATA, {"team": team})
-        if geometry is not None:
-            self._writer.add_metadata(METADATA_NAME, geometry.to_metadata())
         self._stream.flush()
 
     def _channel(self, key: str, kind: type) -> int:

@@ -21,7 +21,6 @@ from mcap.stream_reader import StreamReader
 
 from agent.platform.protocol import DecodeError, Keys
 from dashboard.channels import from_record, kind_of
-from dashboard.geometry import METADATA_NAME, GeometryError, LoadGeometry
 from dashboard.recorder import TEAM_METADATA
 
 RECORD_LIMIT = 64 * 2**20
@@ -45,14 +44,13 @@ class Recorded:
 class Recording:
     """A recording, read once, front to back (iterate :meth:`messages`).
 
-    :attr:`team` and :attr:`geometry` are known once the first message has been read (the
-    metadata comes first); :attr:`cut` says why reading stopped before the file's end (None if
+    :attr:`team` is known once the first message has been read (the metadata comes first);
+    :attr:`cut` says why reading stopped before the file's end (None if
     it did not), :attr:`rejected` counts the messages dropped, by what and why."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
         self.team: str | None = None
-        self.geometry: LoadGeometry | None = None
         self.cut: str | None = None
         self.read_count = 0
         self.rejected: Counter[tuple[str, str]] = Counter()
@@ -64,8 +62,8 @@ class Recording:
         if head != b"\x89MCAP0\r\n":
             raise RecordingError(f"{self.path}: not an MCAP file")
 
-    def header(self) -> tuple[str, LoadGeometry | None]:
-        """The recording's team and load geometry, read from its first records."""
+    def header(self) -> str:
+        """The recording's team, read from its first records."""
         for record in self._records():
             if isinstance(record, Metadata):
                 self._metadata(record)
@@ -73,7 +71,7 @@ class Recording:
                 break
         if self.team is None:
             raise RecordingError(f"{self.path}: no {TEAM_METADATA} metadata (not a team's)")
-        return self.team, self.geometry
+        return self.team
 
     def _records(self) -> Iterator[object]:
         """The file's records, up to its end or to where it was cut (:attr:`cut`)."""
@@ -122,11 +120,6 @@ class Recording:
                 raise RecordingError(f"{self.path}: {TEAM_METADATA}: {err}") from None
             self.team = keys.team
             return keys
-        if record.name == METADATA_NAME and self.geometry is None:
-            try:
-                self.geometry = LoadGeometry.from_metadata(dict(record.metadata))
-            except GeometryError as err:
-                self.rejected["metadata", str(err)[:80]] += 1
         return None
 
     def _message(self, record: Message, channels: dict) -> Recorded | None:

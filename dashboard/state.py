@@ -32,6 +32,7 @@ from agent.platform.protocol import (
     Command,
     Control,
     Estimates,
+    LoadGeometry,
     Measurement,
     Phase,
     PlantStatus,
@@ -39,7 +40,6 @@ from agent.platform.protocol import (
     Status,
     Truth,
 )
-from dashboard.geometry import LoadGeometry
 
 CAPACITY = 3000
 """Points kept per chart trace (at the 20 Hz frame rate, 2.5 minutes of a live run)."""
@@ -101,9 +101,10 @@ class RobotView:
 class TeamState:
     """The team as the page shows it (see the module docstring).
 
-    ``geometry`` (the scenario's outline, graph and period) is optional: without it the top
-    view shows the contacts only, the graph is the one the robots' estimates reveal, and the
-    period is learned from the plant's messages."""
+    ``geometry`` (the load's outline, the graph and the period) comes from the plant
+    (:class:`~agent.platform.protocol.LoadGeometry`, ingested as any message) or is given;
+    without it the top view shows the contacts only, the graph is the one the robots'
+    estimates reveal, and the period is learned from the plant's messages."""
 
     def __init__(
         self,
@@ -198,6 +199,10 @@ class TeamState:
         if isinstance(message, Truth) and self.n is not None and len(message.contacts) != self.n:
             self.reject(kind, "not the team's load")
             return False
+        truth = self.truth
+        if isinstance(message, LoadGeometry) and truth and len(truth.contacts) != message.n:
+            self.reject(kind, "not the team's load")
+            return False
         self.received[kind] += 1
         self.last_heard = now
         self.version += 1
@@ -218,6 +223,9 @@ class TeamState:
             view.bridge = message
         elif isinstance(message, Truth):
             self._truth(message)
+        elif isinstance(message, LoadGeometry):
+            self.geometry = message
+            self.period_s = message.period_s
         elif isinstance(message, PlantStatus):
             self.plant = message
             self._learn_period(message.tick, message.time_s)

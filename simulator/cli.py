@@ -23,13 +23,11 @@ import argparse
 import dataclasses
 import json
 import os
-import signal
 import sys
 import threading
 import time
 from collections import defaultdict
 from collections.abc import Sequence
-from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
@@ -44,6 +42,7 @@ from agent.platform.command_line import (
     write_text,
     zenoh_settings,
 )
+from agent.platform.process import StopSignals
 from agent.platform.protocol import CLOCKS, Phase
 from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings
 from simulator.scenario import (
@@ -114,7 +113,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # From here on a signal only asks the run to stop: over Zenoh the launcher stops its
     # processes and returns what it recorded; in one process the loop is interrupted where it
     # is (see _run). Either way the results are written.
-    with _StopSignals() as stop:
+    with StopSignals().handle() as stop:
         scenario = load_scenario_argument(args.scenario)
         if args.transport is None:  # --can alone runs the processes, as on robots
             args.transport = "zenoh" if args.can else "inprocess"
@@ -138,7 +137,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         except _NothingRecorded as failed:
             reason, detail, rejections = failed.reason, failed.detail, failed.rejections
         if reason == INTERRUPTED:
-            detail = f"stopped by {stop.received or 'KeyboardInterrupt'}"
+            detail = f"stopped by {stop.received.name if stop.received else 'KeyboardInterrupt'}"
         elif reason and not detail:
             detail = _detail(reason)
         if outcome is not None:
@@ -159,7 +158,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                     for path in _write_plots(outcome, Path(args.plot)):
                         print(f"wrote plot {path}")
             except KeyboardInterrupt:
-                reason, detail = INTERRUPTED, f"plots cut short by {stop.received}"
+                reason, detail = INTERRUPTED, f"plots cut short by {stop.received.name}"
         if companion is not None:
             _after_the_run(args, companion, stop.event)
     return _say_verdict(reason, detail, out, recorded=outcome is not None)
@@ -186,9 +185,7 @@ def _companion(args: argparse.Namespace, scenario: Scenario):
     from dashboard.server import ServeError
 
     try:
-        return RunCompanion.open(
-            scenario, record, dashboard, port=args.dashboard_port, stream=sys.stdout
-        )
+        return RunCompanion.open(record, dashboard, port=args.dashboard_port, stream=sys.stdout)
     except ServeError as err:  # a busy port: exit status 4, as an unreachable router
         raise SessionError(str(err)) from None
 
@@ -247,7 +244,7 @@ def _run(
     scenario: Scenario,
     faults: FaultSettings,
     started: float,
-    stop: _StopSignals,
+    stop: StopSignals,
     link: CanLink | None = None,
     on_ready=None,
 ) -> RunOutcome:
@@ -279,49 +276,6 @@ def _run(
             )
     except KeyboardInterrupt:  # before its first instant: nothing to keep
         raise _NothingRecorded(INTERRUPTED, "") from None
-
-
-class _StopSignals:
-    """While entered: SIGINT, SIGTERM and SIGHUP stop a run alike (as Ctrl-C does). Each sets
-    :attr:`event` (and :attr:`received` names the first); inside :meth:`raising` it also
-    raises ``KeyboardInterrupt`` where the main thread is."""
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-    def __init__(self) -> None:
-        self.event = threading.Event()
-        self.received: str | None = None
-        self._raise = False
-        self._previous: dict = {}
-
-    def _handle(self, signum: int, frame) -> None:
-        # Signals come in bursts, and a handler can run again inside itself: only the first
-        # sets the event (whose lock is not re-entrant).
-        if self.received is None:
-            self.received = signal.Signals(signum).name
-            self.event.set()
-        if self._raise:
-            raise KeyboardInterrupt
-
-    def __enter__(self) -> _StopSignals:
-        if threading.current_thread() is threading.main_thread():
-            self._previous = {sig: signal.signal(sig, self._handle) for sig in self.SIGNALS}
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-
-    @contextmanager
-    def raising(self):
-        """Inside this block a signal raises ``KeyboardInterrupt`` (at once if one came)."""
-        self._raise = True
-        try:
-            if self.event.is_set():
-                raise KeyboardInterrupt
-            yield
-        finally:
-            self._raise = False
 
 
 def _faults(args: argparse.Namespace, scenario: Scenario) -> FaultSettings:
@@ -465,7 +419,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
     from agent.platform.config import Bound, bounds
     from agent.platform.dispatch import NETWORK_UNAVAILABLE
-    from agent.platform.process import stop_on_signals
     from agent.platform.protocol import Keys
     from simulator.can_drivers import CanBusError
     from simulator.node import run_plant
@@ -492,7 +445,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             team,
             args.clock,
             settings,
-            stop_on_signals(),
+            StopSignals().handle().event,
             args.start_timeout,
             link,
         )

@@ -34,7 +34,6 @@ launcher leaves no orphan.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import math
 import os
@@ -74,6 +73,7 @@ from agent.platform.zenoh_session import (
     open_session,
     take,
 )
+from bridge.config import CanSettings, can_table
 from simulator.history import History
 from simulator.inprocess import RunOutcome, Sample
 from simulator.lockstep import INTERRUPTED, RunEnd, Verdict, halted
@@ -173,25 +173,18 @@ def bridge_watchdog_ms(scenario: Scenario, clock: str) -> int:
     return min(10_000, math.ceil(BRIDGE_WATCHDOG_MS / min(1.0, scenario.run.real_time_factor)))
 
 
-def can_table(robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS) -> str:
-    """The ``[can]`` table of robot ``robot``'s ``robot.toml`` in a CAN run, which its AGV
-    bridge (``heft bridge``) reads beside the agent's part: its robot's bus, as the plant
-    opens it; node id = robot id; the tick from the plant's ``Sync`` frames."""
-    lines = [
-        "",
-        "[can]",
-        f"interface = {_toml_string(can.interface)}",
-        f"channel = {_toml_string(can.channel_of(robot))}",
-        f"node = {robot}",
-        f"watchdog_ms = {int(watchdog_ms)}",
-        'time_source = "sync"',
-    ]
-    return "\n".join(lines) + "\n"
-
-
-def _toml_string(text: str) -> str:
-    """``text`` as a TOML basic string (JSON's escapes are TOML's)."""
-    return json.dumps(text, ensure_ascii=False)
+def can_settings(robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS) -> CanSettings:
+    """What robot ``robot``'s ``robot.toml`` says in its ``[can]`` table in a CAN run
+    (written by :func:`bridge.config.can_table`), which its AGV bridge (``heft bridge``)
+    reads beside the agent's part: its robot's bus, as the plant opens it; node id = robot
+    id; the tick from the plant's ``Sync`` frames."""
+    return CanSettings(
+        interface=can.interface,
+        channel=can.channel_of(robot),
+        node=robot,
+        watchdog_ms=int(watchdog_ms),
+        time_source="sync",
+    )
 
 
 class Collector:
@@ -241,7 +234,7 @@ class Collector:
         self.history: History[Sample] = History()
         self.phase_ticks: dict[str, int] = {}
         self.newest: dict[int, Estimates] = {}
-        """Each robot's newest estimates heard (of the team's newest generation)."""
+        """Each robot's newest estimates heard (since the team's latest rejoin)."""
         self.statuses: dict[int, Status] = {}
         """Each robot's latest status."""
         self.halted = False
@@ -555,7 +548,8 @@ def run_zenoh(
                             config = folder / f"robot-{i}.toml"
                             text = robot_toml(i, scenario, team, clock, router, faults)
                             if can is not None:
-                                text += can_table(i, can, bridge_watchdog_ms(scenario, clock))
+                                watchdog_ms = bridge_watchdog_ms(scenario, clock)
+                                text += can_table(can_settings(i, can, watchdog_ms))
                             config.write_text(text, encoding="utf-8")
                             if can is not None:
                                 args = ["bridge", "--config", str(config)]

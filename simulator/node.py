@@ -23,6 +23,10 @@ Robots whose agent's liveliness ends get zero force until it is back (the robot'
 restarted, or its link up again): then the plant applies its commands again, as a real AGV
 would.
 
+It also tells displays the load's outline and the graph
+(:class:`~agent.platform.protocol.LoadGeometry`) when it comes up and with each of its
+statuses: a display or a recorder that joins late has it within :data:`STATUS_EVERY_S`.
+
 The port is the robots' hardware as the plant stands in for it: Zenoh
 (:class:`~agent.platform.zenoh_robot_io.ZenohAgentsPort`) when the agents talk to the plant
 directly, or the AGVs' CAN buses (:class:`~simulator.can_drivers.CanDriversPort`, ``heft sim
@@ -66,8 +70,9 @@ SLOW_TICK_S = 2.0
 WAIT_S = 0.2
 """The longest the loop waits for something to arrive before it looks at its stop."""
 STATUS_EVERY_S = 1.0
-"""The plant's status goes out this often (wall clock) while it runs, besides at its end and
-each time a robot is lost: a plant killed before its end leaves its counters behind."""
+"""The plant's status (and the load's geometry) goes out this often (wall clock) while it
+runs, besides at its end and each time a robot is lost: a plant killed before its end leaves
+its counters behind."""
 
 
 class PlantNode:
@@ -84,6 +89,7 @@ class PlantNode:
         self.scenario = scenario
         self.plant = PlantTicks(scenario)
         """The plant, tick by tick (the port carries the values: the buses quantise them)."""
+        self.geometry = scenario.load_geometry()
         self.port = port
         self.clock = clock
         self.stop = stop or threading.Event()
@@ -266,6 +272,7 @@ class PlantNode:
         if self.clock == "realtime" and s.run.real_time_factor != 1.0:
             pace = f" at {s.run.real_time_factor:g} x real time"
         log.info("plant up: %r, %d robots, %s clock%s", s.name, s.n, self.clock, pace)
+        self.port.report(self.geometry)
         if not self.wait_for_agents():
             self.publish_status()
             return 0 if self.stop.is_set() else 1  # stopped before the start, or agents missing
@@ -318,6 +325,7 @@ class PlantNode:
         )
 
     def publish_status(self) -> None:
+        self.port.report(self.geometry)
         self.port.report(self.status())
 
 

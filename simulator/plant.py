@@ -181,10 +181,6 @@ class Plant:
             raise ValueError(f"force must be finite, got {force!r}")
         self._commanded[robot - 1] = (fx, fy)
 
-    def reset_commands(self) -> None:
-        """Set every robot's held force to zero (from the next :meth:`advance`)."""
-        self._commanded = [_ZERO] * self._n
-
     def advance(self) -> None:
         """Integrate one sensor period: ``substeps`` steps of ``1 / physics_hz``, the held
         forces applied at the contacts' current world points before every step.

@@ -32,6 +32,8 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from agent.platform.evaluation import robot_errors, true_relative  # noqa: E402
+
 if TYPE_CHECKING:
     from agent.platform.protocol import Estimates
     from simulator.inprocess import RunOutcome, Sample
@@ -154,7 +156,7 @@ def plot_relative_positions(outcome: RunOutcome, path: Path) -> Path:
                 _estimate(i, lambda e, j=j, a=axis: _component(e.relative_positions.get(j), a)),
             )
             ax.plot(t, v, "-", color=colour, **ESTIMATE, label=f"estimated $\\hat z_{{ij,{c}}}$")
-            t, v = _series(history, _true_relative(i, j, axis))
+            t, v = _series(history, lambda s, i=i, j=j, a=axis: true_relative(s.truth, i, j)[a])
             ax.plot(t, v, "--", color=colour, **TRUTH, label=f"true $z_{{ij,{c}}}$")
         letter = chr(ord("a") + k) if k < 26 else str(k)
         ij = f"{i}{j}" if max(i, j) < 10 else f"{i},{j}"
@@ -166,14 +168,6 @@ def plot_relative_positions(outcome: RunOutcome, path: Path) -> Path:
     fig.suptitle("Step 1: relative positions of the contact points (world frame)")
     fig.tight_layout(rect=(0, 0.07 if rows <= 3 else 0.04, 1, 1))
     return _save(fig, path)
-
-
-def _true_relative(i: int, j: int, axis: int) -> Getter:
-    def get(sample: Sample) -> float:
-        contacts = sample.truth.contacts
-        return contacts[i - 1][axis] - contacts[j - 1][axis]
-
-    return get
 
 
 # ------------------------------------------------------------------------------ Fig. 5
@@ -229,19 +223,21 @@ def _com_rows(outcome: RunOutcome) -> list[Sample]:
     return rows
 
 
-def _error_norm(sample: Sample, robot: int, key: str) -> float | None:
-    est = sample.estimates.get(robot)
-    value = None if est is None else getattr(est, key)
-    return None if value is None else math.dist(value, sample.truth.com_offset)
+def _error(robot: int, key: str) -> Getter:
+    """A getter of one of ``robot``'s errors against the truth
+    (:func:`~agent.platform.evaluation.robot_errors`, ``key`` one of its keys)."""
+
+    def get(sample: Sample) -> float | None:
+        return robot_errors(sample.estimates.get(robot), sample.truth, ())[key]
+
+    return get
 
 
 def _lyapunov(sample: Sample, robot: int) -> float | None:
     """``V = ½ (‖z_C − ẑ_C‖² + (ω − ω̂)²)`` with observer (24)'s ``ẑ_C``."""
-    est = sample.estimates.get(robot)
-    if est is None or est.com_observer is None or est.omega is None:
-        return None
-    e_z = math.dist(est.com_observer, sample.truth.com_offset)
-    return 0.5 * (e_z**2 + (sample.truth.omega - est.omega) ** 2)
+    errors = robot_errors(sample.estimates.get(robot), sample.truth, ())
+    e_z, e_omega = errors["com_observer_m"], errors["omega_rad_s"]
+    return None if e_z is None or e_omega is None else 0.5 * (e_z**2 + e_omega**2)
 
 
 def _positive(values: np.ndarray) -> np.ndarray:
@@ -284,10 +280,11 @@ def plot_com_observer(outcome: RunOutcome, path: Path) -> Path:
     _finish(ax_w, "rad/s", "(a) angular velocity ω")
     ax_w.legend(fontsize=8, loc="best")
 
-    for key, style, name in (("com_offset", "-", "team"), ("com_observer", ":", "observer (24)")):
-        t, v = _series(rows, lambda s, key=key: _error_norm(s, robot, key))
+    errors = (("com_offset_m", "-", "team"), ("com_observer_m", ":", "observer (24)"))
+    for key, style, name in errors:
+        t, v = _series(rows, _error(robot, key))
         ax_e.plot(t, _positive(v), style, lw=1.4, label=f"{name}: $\\|z_C - \\hat z_C\\|$ [m]")
-    t, v = _series(rows, lambda s: _omega_error(s, robot))
+    t, v = _series(rows, _error(robot, "omega_rad_s"))
     ax_e.plot(t, _positive(v), "-", color="C2", lw=1.0, label="|ω − ω̂| [rad/s]")
     ax_e.set_yscale("log")
     _finish(ax_e, "m, rad/s", "(b) estimation errors")
@@ -306,12 +303,6 @@ def plot_com_observer(outcome: RunOutcome, path: Path) -> Path:
     fig.suptitle(f"Step 5: centre-of-mass offset, team estimate and observer (24){missing}")
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     return _save(fig, path)
-
-
-def _omega_error(sample: Sample, robot: int) -> float | None:
-    """``|ω − ω̂|`` of ``robot`` at ``sample`` (None before it estimates ω)."""
-    est = sample.estimates.get(robot)
-    return None if est is None or est.omega is None else abs(sample.truth.omega - est.omega)
 
 
 # ------------------------------------------------------------------------------ entry point

@@ -253,8 +253,8 @@ def load_changes(outcome: RunOutcome) -> dict[str, Any]:
     """The scenario's load changes and the team's restarts (:mod:`agent.algorithm.coordination`):
     each change with the first restart after it (``restarted_s``, ``None`` if the team never
     restarted for it) and the delay (``latency_s``); every restart (``restarts_s``, from the
-    recorded estimates: the tick each epoch began); and the restarts that followed no change
-    (``false_alarms``)."""
+    recorded estimates: the tick at which each load change's Step 4 began); and the restarts
+    that followed no change (``false_alarms``)."""
     period = outcome.scenario.period_s
     began: dict[int, int] = {}
     for sample in (*outcome.history, outcome.final):

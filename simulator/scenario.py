@@ -56,6 +56,7 @@ from agent.platform.config import (
     toml_value,
 )
 from agent.platform.geometry import Vec2
+from agent.platform.protocol import LoadGeometry
 
 PAPER_SCENARIO = Path(__file__).resolve().parent / "scenarios" / "paper.toml"
 """The paper's Sec. VI scenario, shipped with the simulator package."""
@@ -311,14 +312,6 @@ class Scenario:
         """The first tick at or after :attr:`end_s`."""
         return math.ceil(self.end_s / self.period_s - 1e-9)
 
-    def body_at(self, time_s: float) -> Body:
-        """The load after the changes up to ``time_s``."""
-        body = self.body
-        for event in self.events:
-            if event.at_s <= time_s:
-                body = event.applied_to(body)
-        return body
-
     @property
     def n(self) -> int:
         """Number of robots (one per contact)."""
@@ -340,6 +333,18 @@ class Scenario:
             raise ValueError(f"robot {robot} does not exist (robots are 1..{self.n})")
         found = {j for i, j in self.edges if i == robot} | {i for i, j in self.edges if j == robot}
         return tuple(sorted(found))
+
+    def load_geometry(self) -> LoadGeometry:
+        """What the plant tells displays of this scenario (:class:`LoadGeometry`): the load's
+        polygon about its COM, the graph, the sensor period and :attr:`end_tick`."""
+        cx, cy = self.body.com
+        return LoadGeometry(
+            n=self.n,
+            outline=tuple((x - cx, y - cy) for x, y in self.body.polygon),
+            edges=tuple(sorted((min(e), max(e)) for e in self.edges)),
+            period_s=self.period_s,
+            end_tick=self.end_tick,
+        )
 
 
 # --------------------------------------------------------------------------------------------

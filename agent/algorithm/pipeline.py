@@ -129,7 +129,7 @@ class EstimationPipeline:
         """Whether the estimates that ``phase`` is for have settled."""
         s = self.settle
         if phase == Phase.EXCITE:
-            return s.distances.settled and s.centroid.settled and s.spread.settled
+            return s.distances.settled and s.centroid.settled and s.mean_square_offset.settled
         if phase == Phase.INERTIA:
             return s.moment.settled
         if phase == Phase.PUSH:
@@ -209,8 +209,8 @@ class EstimationPipeline:
         self.settle.centroid.update(
             (x[0] * u[0] + x[1] * u[1], u[0] * x[1] - u[1] * x[0]), e, std, size
         )
-        spread_std = None if std is None else 2.0 * math.hypot(*x) * std
-        self.settle.spread.update((self.mean_square_offset,), e, spread_std)
+        xi_std = None if std is None else 2.0 * math.hypot(*x) * std
+        self.settle.mean_square_offset.update((self.mean_square_offset,), e, xi_std)
 
     def _moment_of_inertia(self, e: int, prev: int | None, span: float, schedule: Schedule) -> None:
         """Step 4 over the interval ``span`` from the instant ``prev`` to ``e``."""

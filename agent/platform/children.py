@@ -30,10 +30,11 @@ DEATH_SIGNAL = signal.SIGKILL
 
 Not SIGTERM, measured: the kernel sends the parent-death signal again each time the child is
 handed to another of the dying launcher's threads, so a child gets a burst of them; the
-processes' handler (``agent.platform.process.stop_on_signals``: ``Event.set`` in a signal handler)
-is not re-entrant and deadlocks when one arrives while it runs (about 1 launcher kill in 25 left
-an agent or the plant behind), and ``heft router`` sometimes never wakes from its wait. The
-launcher is gone and nothing is recorded: there is nothing for a child to save."""
+processes' handler as it was then (``Event.set`` in a signal handler; see
+:class:`agent.platform.process.StopSignals` now) was not re-entrant and deadlocked when one
+arrived while it ran (about 1 launcher kill in 25 left an agent or the plant behind), and
+``heft router`` sometimes never woke from its wait. The launcher is gone and nothing is
+recorded: there is nothing for a child to save."""
 RECENT_LINES = 50
 """Lines of a child's output kept for :meth:`Child.wait_for_line`."""
 LOG = logging.getLogger("heft.children")

@@ -54,11 +54,6 @@ def _key(key: Key) -> str:
     return key + "".join(reversed(suffixes))
 
 
-def coerce(value: Any, tp: Any, key: Key) -> Any:
-    """Check ``value`` against the annotation ``tp`` and convert it (lists become tuples)."""
-    return _coercer(tp)(value, key)
-
-
 Coercer = typing.Callable[[Any, Key], Any]
 
 
@@ -336,29 +331,6 @@ def _from_table(cls: type[T], table: Any, where: Key) -> T:
     if validate is not None:
         validate(_key(where))
     return obj
-
-
-def within(where: str, low: float, high: float, **values: float) -> None:
-    """Raise :class:`ConfigError` unless every value is in ``[low, high]``."""
-    for key, value in values.items():
-        if not low <= value <= high:
-            raise ConfigError(
-                f"{where}.{key}: expected a number in [{low:g}, {high:g}], got {value!r}"
-            )
-
-
-def positive(where: str, **values: float) -> None:
-    """Raise :class:`ConfigError` unless every value is > 0."""
-    for key, value in values.items():
-        if not value > 0:
-            raise ConfigError(f"{where}.{key}: expected a positive number, got {value!r}")
-
-
-def non_negative(where: str, **values: float) -> None:
-    """Raise :class:`ConfigError` unless every value is >= 0."""
-    for key, value in values.items():
-        if not value >= 0:
-            raise ConfigError(f"{where}.{key}: expected a non-negative number, got {value!r}")
 
 
 # ------------------------------------------------------------------------------ ranges

@@ -9,6 +9,8 @@ import queue
 import signal
 import threading
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 SIGNAL_POLL_S = 0.5
@@ -33,39 +35,85 @@ class StopEvent(threading.Event):
         return True
 
 
-def stop_on_signals(stop: threading.Event | None = None) -> threading.Event:
-    """An event set by SIGINT, SIGTERM or SIGHUP (call from the main thread); by default a
-    :class:`StopEvent`.
+class StopSignals:
+    """SIGINT, SIGTERM and SIGHUP, each a request to stop, alike: the first one sets
+    :attr:`event` (a :class:`StopEvent`) and is :attr:`received`. Every process's stop is one
+    of these, taken one of two ways:
 
-    The handler runs in the main thread between two bytecodes, possibly while that thread holds
-    the event's own lock (inside ``wait`` or ``set``); setting the event from the handler could
-    then deadlock, so it is set from a short-lived thread instead."""
-    stop = stop or StopEvent()
+    - :meth:`handle` (from the main thread): a Python handler. It runs in the main thread
+      between two bytecodes, possibly while that thread holds the event's own lock (inside
+      ``wait`` or ``set``); setting the event there could deadlock, so a short-lived thread
+      sets it. Inside :meth:`raising` the handler also raises ``KeyboardInterrupt`` where the
+      main thread is, for work that does not look at the event (a simulation loop, plots, a
+      child's wait).
+    - :meth:`take`: no Python handler. The signals are blocked in the calling thread (call it
+      from the main thread before any other thread starts, so that every thread inherits the
+      mask) and a thread of its own takes them with ``sigwait``. The AGV bridge uses it:
+      measured in a bridge under User-Mode Linux, the handler left the process stuck in a
+      0.01 s queue wait after SIGTERM about 2 times in 3.
 
-    def handler(*_: object) -> None:
-        threading.Thread(target=stop.set, name="stop-signal", daemon=True).start()
+    Used as a context manager (``with StopSignals().handle() as stop:``), the handlers that were
+    there before :meth:`handle` are put back on leaving; otherwise they stay for the process's
+    life."""
 
-    for sig in STOP_SIGNALS:
-        signal.signal(sig, handler)
-    return stop
+    def __init__(self) -> None:
+        self.event = StopEvent()
+        self.received: signal.Signals | None = None
+        """The first stop signal, once one came."""
+        self._raising = False
+        self._previous: dict = {}
 
+    def handle(self) -> StopSignals:
+        """Take the signals with a Python handler (from the main thread; elsewhere, where
+        Python allows no handler, the signals keep theirs)."""
+        if threading.current_thread() is threading.main_thread():
+            for sig in STOP_SIGNALS:
+                self._previous.setdefault(sig, signal.signal(sig, self._handler))
+        return self
 
-def stop_on_signals_taken(stop: threading.Event | None = None) -> threading.Event:
-    """An event set by SIGINT, SIGTERM or SIGHUP, with no Python signal handler: the signals
-    are blocked in the calling thread (call it from the main thread before any other thread
-    starts, so that every thread inherits the mask) and one thread of its own takes them with
-    ``sigwait``. The AGV bridge uses it: measured in a bridge under User-Mode Linux, the
-    handler of :func:`stop_on_signals` left the process stuck in a 0.01 s queue wait after
-    SIGTERM about 2 times in 3."""
-    stop = stop or threading.Event()
-    signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    def take(self) -> StopSignals:
+        """Take the signals with ``sigwait`` on a thread of its own (see the class docstring)."""
+        signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
-    def take() -> None:
-        signal.sigwait(STOP_SIGNALS)
-        stop.set()
+        def wait_for_one() -> None:
+            self._stop(signal.Signals(signal.sigwait(STOP_SIGNALS)))
 
-    threading.Thread(target=take, name="stop-signals", daemon=True).start()
-    return stop
+        threading.Thread(target=wait_for_one, name="stop-signals", daemon=True).start()
+        return self
+
+    def _handler(self, signum: int, _frame: object) -> None:
+        # Signals come in bursts, and a handler can run again inside itself: nothing here
+        # takes a lock.
+        if self.received is None:
+            self.received = signal.Signals(signum)
+        threading.Thread(target=self.event.set, name="stop-signal", daemon=True).start()
+        if self._raising:
+            raise KeyboardInterrupt
+
+    def _stop(self, sig: signal.Signals) -> None:
+        if self.received is None:
+            self.received = sig
+        self.event.set()
+
+    @contextmanager
+    def raising(self) -> Iterator[None]:
+        """Inside this block a stop signal raises ``KeyboardInterrupt`` in the main thread
+        (at once if one came already)."""
+        self._raising = True
+        try:
+            if self.received is not None:
+                raise KeyboardInterrupt
+            yield
+        finally:
+            self._raising = False
+
+    def __enter__(self) -> StopSignals:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
 
 
 def in_user_mode_linux(cpuinfo: str | None = None) -> bool:

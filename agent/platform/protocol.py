@@ -8,8 +8,9 @@ Every message that crosses a process or a machine is defined here, and nowhere e
 - :class:`Share` — what an agent tells its graph neighbours each tick (agent → neighbours),
 - :class:`Estimates` and :class:`Status` — an agent's estimates and health (agent → launcher,
   displays),
-- :class:`Clock`, :class:`Truth` and :class:`PlantStatus` — the simulated plant's tick, its
-  ground truth (evaluation only: no agent subscribes to it) and its counters,
+- :class:`Clock`, :class:`Truth`, :class:`LoadGeometry` and :class:`PlantStatus` — the
+  simulated plant's tick, its ground truth (evaluation only: no agent subscribes to it), the
+  load's outline and the graph (for displays) and its counters,
 - :class:`BridgeStatus` — an AGV bridge's health,
 - :class:`Control` — what the launcher tells every process of a team (stop).
 
@@ -36,7 +37,7 @@ from enum import IntEnum
 import orjson as _orjson
 
 from agent.platform import team as _team
-from agent.platform.config import ConfigError, from_table
+from agent.platform.config import MAX_ROBOTS, ConfigError, from_table
 from agent.platform.geometry import Vec2
 from agent.platform.team import ConsensusState
 
@@ -265,6 +266,30 @@ class Truth:
 
 
 @dataclass(frozen=True, slots=True)
+class LoadGeometry:
+    """What the team's messages do not say but a display wants: the load's polygon about its
+    COM and the communication graph. The simulated plant publishes it when it starts and with
+    each of its statuses (a display that joins late has it within a status period)."""
+
+    n: int
+    outline: tuple[Vec2, ...]
+    """Polygon vertices minus the COM, in the load frame: at truth pose ``(p_C, θ)`` vertex
+    ``v`` is at ``p_C + R(θ) v`` in ``W``."""
+    edges: tuple[tuple[int, int], ...]
+    """Undirected edges ``(i, j)``, ``i < j``."""
+    period_s: float
+    """The sensor period: tick ``k`` is at ``k · period_s``."""
+    end_tick: int = 0
+    """The first tick at which the run may end (the scenario's load changes and hold); the
+    final instant is not before it."""
+
+    def world_outline(self, com: Vec2, angle: float) -> list[Vec2]:
+        """The polygon in ``W`` with the COM at ``com`` and the load frame at ``angle``."""
+        c, s = _math.cos(angle), _math.sin(angle)
+        return [(com[0] + c * x - s * y, com[1] + s * x + c * y) for x, y in self.outline]
+
+
+@dataclass(frozen=True, slots=True)
 class PlantStatus:
     """The simulated plant's counters; latencies (ms, from publishing a tick to receiving a
     command for it) are ``None`` before any was measured."""
@@ -340,6 +365,7 @@ class Keys:
     ``heft/<team>/robot/<id>/bridge/alive`` (liveliness)   AGV bridge
     ``heft/<team>/plant/clock``           Clock            plant → everyone
     ``heft/<team>/plant/truth``           Truth            plant → launcher, displays
+    ``heft/<team>/plant/geometry``        LoadGeometry     plant → displays
     ``heft/<team>/plant/status``          PlantStatus      plant → launcher, displays
     ``heft/<team>/control``               Control          launcher → everyone
     ==================================== ================ ===================================
@@ -404,6 +430,9 @@ class Keys:
     def truth(self) -> str:
         return f"{self.root}/plant/truth"
 
+    def geometry(self) -> str:
+        return f"{self.root}/plant/geometry"
+
     def plant_status(self) -> str:
         return f"{self.root}/plant/status"
 
@@ -428,6 +457,8 @@ class Keys:
             return self.clock()
         if isinstance(message, Truth):
             return self.truth()
+        if isinstance(message, LoadGeometry):
+            return self.geometry()
         if isinstance(message, PlantStatus):
             return self.plant_status()
         if isinstance(message, Control):
@@ -504,9 +535,9 @@ KINDS: dict[type, int] = {
     Control: 8,
     PlantStatus: 9,
     BridgeStatus: 10,
+    LoadGeometry: 11,
 }
 """Every message class and its kind byte."""
-_STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
 
 
 def _finite(*values: float) -> bool:
@@ -717,6 +748,10 @@ MAX_LOAD_CHANGES = 10_000
 """The team's restarts for a changed load in one run (one a second for almost three hours)."""
 MAX_REJOINS = 10_000
 """The team's new beginnings after a halt in one run."""
+MAX_VERTICES = 1000
+"""Of the load's outline."""
+MAX_COORDINATE = 1000.0
+"""m, an outline vertex's coordinates."""
 
 
 def _within(name: str, value: float, low: float, high: float) -> None:
@@ -802,6 +837,24 @@ def _truth(m: Truth) -> None:
         value = getattr(m, name)
         if not (_math.isfinite(value) and value >= 0.0):
             raise DecodeError(f"truth.{name} = {value!r} is not a finite number >= 0")
+
+
+def _load_geometry(m: LoadGeometry) -> None:
+    _within("load_geometry.n", m.n, 2, MAX_ROBOTS)
+    if not 3 <= len(m.outline) <= MAX_VERTICES or not all(
+        abs(v) <= MAX_COORDINATE for p in m.outline for v in p
+    ):
+        raise DecodeError(
+            f"load_geometry.outline: not a polygon of 3 to {MAX_VERTICES} vertices within"
+            f" {MAX_COORDINATE:g} m"
+        )
+    pairs = m.n * (m.n - 1) // 2
+    if not all(1 <= i < j <= m.n for i, j in m.edges) or len(set(m.edges)) != len(m.edges):
+        raise DecodeError(f"load_geometry.edges: not edges i < j of robots 1..{m.n}, each once")
+    if len(m.edges) > pairs:
+        raise DecodeError(f"load_geometry.edges: more than {pairs}")
+    _within("load_geometry.period_s", m.period_s, 1e-4, 1.0)
+    _within("load_geometry.end_tick", m.end_tick, 0, MAX_TICK)
 
 
 def _plant_status(m: PlantStatus) -> None:
@@ -948,6 +1001,7 @@ DOMAINS = {
     Status: _status,
     Truth: _truth,
     PlantStatus: _plant_status,
+    LoadGeometry: _load_geometry,
     BridgeStatus: _bridge_status,
     Control: _control,
 }

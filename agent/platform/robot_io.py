@@ -35,6 +35,7 @@ from agent.platform.protocol import (
     Command,
     Control,
     Estimates,
+    LoadGeometry,
     Measurement,
     PlantStatus,
     Status,
@@ -42,7 +43,7 @@ from agent.platform.protocol import (
 )
 
 AgentReport = Estimates | Status
-RobotReport = Clock | Truth | PlantStatus | BridgeStatus
+RobotReport = Clock | Truth | LoadGeometry | PlantStatus | BridgeStatus
 
 
 @dataclass(frozen=True, slots=True)

@@ -43,13 +43,11 @@ class InMemoryTransport:
         self._inbox: dict[int, list[Share]] = {i: [] for i in self.neighbours}
         self._lock = threading.Lock()
         self._wake = wake
-        self.delivered = 0
 
     def send(self, share: Share) -> None:
         with self._lock:
             for j in self.neighbours[share.sender]:
                 self._inbox[j].append(share)
-                self.delivered += 1
         if self._wake is not None:
             for j in self.neighbours[share.sender]:
                 self._wake(j)

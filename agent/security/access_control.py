@@ -17,7 +17,7 @@ identity     publishes                          subscribes to                   
                                                                                   and its
                                                                                   neighbours'
 ``plant``    every velocity, clock, truth,      every force, control              watches every
-             plant status                                                         agent and
+             load geometry, plant status                                          agent and
                                                                                   bridge
 ``operator`` control                            everything of the team            watches all
 ``dashboard`` nothing                           everything of the team            watches all
@@ -172,6 +172,7 @@ def team_grants(team: str, robots: int, edges: Sequence[tuple[int, int]]) -> dic
             *(keys.velocity(i) for i in ids),
             keys.clock(),
             keys.truth(),
+            keys.geometry(),
             keys.plant_status(),
         ),
         subscribe=(*(keys.force(i) for i in ids), keys.control()),

@@ -18,7 +18,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from agent.platform.process import stop_on_signals_taken
+from agent.platform.process import StopSignals
 from agent.platform.protocol import Command, DecodeError, Keys, Measurement, decode, encode
 from agent.platform.zenoh_session import SessionError, ZenohSettings, open_session, tick_publisher
 
@@ -33,7 +33,7 @@ def echo(measurement: Measurement) -> Command:
 
 def run_echo_agent(settings: ZenohSettings, team: str, robot: int) -> int:
     """Answer robot ``robot``'s measurements until a stop signal; 0."""
-    stop = stop_on_signals_taken()
+    stop = StopSignals().take().event
     keys = Keys(team)
     with open_session(settings) as session:
         publisher = tick_publisher(session, keys.force(robot))

@@ -23,6 +23,7 @@ from agent.platform.children import Child, cpu_seconds, free_port
 from agent.platform.config import to_toml
 from agent.platform.protocol import BridgeStatus, DecodeError, Keys, decode
 from agent.platform.zenoh_session import ZenohSettings, open_session
+from bridge.config import CanSettings, can_table
 from bridge.devtools.echo_agent import READY
 from bridge.node import STATUS_EVERY_S
 
@@ -90,12 +91,15 @@ def bridge_toml(
         clock="realtime",
         zenoh=ZenohSettings(mode="client", connect=(router,)),
     )
-    can = (
-        f'\n[can]\ninterface = "socketcan"\nchannel = "{channel}"\nnode = {robot}\n'
-        f'watchdog_ms = {int(watchdog_ms)}\ntime_source = "sync"\n'
-        f"realtime_priority = {int(realtime_priority)}\n"
+    can = CanSettings(
+        interface="socketcan",
+        channel=channel,
+        node=robot,
+        watchdog_ms=int(watchdog_ms),
+        time_source="sync",
+        realtime_priority=int(realtime_priority),
     )
-    return to_toml(config, f"Robot {robot}'s bridge, for a benchmark.") + can
+    return to_toml(config, f"Robot {robot}'s bridge, for a benchmark.") + can_table(can)
 
 
 class BridgeRig:
@@ -168,12 +172,6 @@ class BridgeRig:
         if not agent.wait_for_line(READY, timeout_s):
             self.check()
             raise RigError(f"the echo agent did not come up in time:\n{agent.tail()}")
-
-    def kill_agent(self) -> None:
-        """``kill -9`` the echo agent, as a crash would end it."""
-        agent = self.children.pop("echo agent")
-        agent.process.kill()
-        agent.stop()
 
     def check(self) -> None:
         """:class:`RigError` if a process of the rig has ended."""

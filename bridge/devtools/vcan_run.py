@@ -20,11 +20,12 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager, suppress
+from collections.abc import Sequence
+from contextlib import suppress
 from pathlib import Path
 
 from agent.platform.command_line import PROG, UsageError
+from agent.platform.process import STOP_SIGNALS, StopSignals
 from bridge.devtools.vcan import (
     ENABLE_HELP,
     GUEST_TOOLS,
@@ -43,33 +44,11 @@ from bridge.devtools.vcan import (
     uml_arguments,
 )
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 TIMED_OUT = 124
 """Exit status when ``--timeout`` stopped the command (as coreutils' ``timeout``)."""
 GUEST_FAILED = 125
 """Exit status when the guest died without reporting the command's exit status."""
 UML_BINARIES = ("linux.uml", "linux")
-
-
-class _Stopped(Exception):
-    def __init__(self, signum: int) -> None:
-        super().__init__(signum)
-        self.signum = signum
-
-
-@contextmanager
-def _stop_signals() -> Iterator[None]:
-    """SIGINT, SIGTERM and SIGHUP raise :class:`_Stopped` in the main thread meanwhile."""
-
-    def handler(signum: int, _frame: object) -> None:
-        raise _Stopped(signum)
-
-    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
 
 
 def _say(message: str) -> None:
@@ -154,9 +133,9 @@ def _ip(*args: str) -> None:
 
 def _run_child(command: Sequence[str], timeout: float | None) -> int:
     """``command`` with this process's stdin, stdout and stderr; its exit status."""
-    with _stop_signals():
+    with StopSignals().handle() as stop:
         try:
-            child = subprocess.Popen(list(command))
+            child = subprocess.Popen(list(command))  # a signal meanwhile: raised at the wait
         except FileNotFoundError:
             _say(f"vcan: {command[0]}: command not found")
             return 127
@@ -164,17 +143,19 @@ def _run_child(command: Sequence[str], timeout: float | None) -> int:
             _say(f"vcan: {command[0]}: permission denied")
             return 126
         try:
-            return exit_status(child.wait(timeout))
+            with stop.raising():
+                return exit_status(child.wait(timeout))
         except subprocess.TimeoutExpired:
             _say(f"error: the command did not finish within {timeout:g} s; stopped it")
             _end(child, signal.SIGTERM)
             return TIMED_OUT
-        except _Stopped as stop:
-            if stop.signum != signal.SIGINT:  # a terminal's Ctrl-C has reached it already
+        except KeyboardInterrupt:
+            signum = stop.received or signal.SIGINT
+            if signum != signal.SIGINT:  # a terminal's Ctrl-C has reached it already
                 with suppress(ProcessLookupError):
-                    child.send_signal(stop.signum)
+                    child.send_signal(signum)
             _end(child, None)
-            return 128 + stop.signum
+            return 128 + signum
 
 
 def _end(child: subprocess.Popen, signum: int | None, grace: float = 10.0) -> None:
@@ -251,31 +232,34 @@ def run_uml(
         out_r, out_w = os.pipe()
         err_r, err_w = os.pipe()
         pipes += [out_r, out_w, err_r, err_w]
-        with _stop_signals():
+        with StopSignals().handle() as stop:
             try:
-                # A signal between the start and `guest = ...` would leave the guest running.
-                signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
-                try:
-                    guest = subprocess.Popen(
-                        uml_arguments(binary, str(script), memory, folder, out_w, err_w),
-                        stdin=subprocess.DEVNULL,
-                        stdout=subprocess.PIPE,
-                        stderr=subprocess.STDOUT,
-                        pass_fds=(out_w, err_w),
-                        cwd=folder,
-                        start_new_session=True,
-                        preexec_fn=_unblock_signals,
-                    )
-                finally:
-                    _unblock_signals()
-                for fd in (out_w, err_w):
-                    os.close(fd)
-                    pipes.remove(fd)
-                return _relay(guest, out_r, err_r, nonce, memory, timeout)
-            except _Stopped as stop:
+                with stop.raising():
+                    # A signal between the start and `guest = ...` would leave the guest
+                    # running.
+                    signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+                    try:
+                        guest = subprocess.Popen(
+                            uml_arguments(binary, str(script), memory, folder, out_w, err_w),
+                            stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT,
+                            pass_fds=(out_w, err_w),
+                            cwd=folder,
+                            start_new_session=True,
+                            preexec_fn=_unblock_signals,
+                        )
+                    finally:
+                        _unblock_signals()
+                    for fd in (out_w, err_w):
+                        os.close(fd)
+                        pipes.remove(fd)
+                    return _relay(guest, out_r, err_r, nonce, memory, timeout)
+            except KeyboardInterrupt:
+                signum = stop.received or signal.SIGINT
                 _kill_group(guest)
-                _say(f"vcan: stopped by {signal.Signals(stop.signum).name}; the guest was killed")
-                return 128 + stop.signum
+                _say(f"vcan: stopped by {signum.name}; the guest was killed")
+                return 128 + signum
     finally:
         _kill_group(guest)
         for fd in pipes:

@@ -17,9 +17,6 @@ from pathlib import Path
 
 from agent.platform.command_line import HelpFormatter, UsageError
 
-CHROMIUM = "/usr/bin/chromium"
-"""The browser the benchmark's pages run in (Debian's ``chromium`` package)."""
-
 
 def register(benchmarks: argparse._SubParsersAction) -> None:
     """Add ``heft bench dashboard`` (entry point of the group ``heft.bench``)."""
@@ -58,9 +55,11 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
 def missing_browser() -> str | None:
     """What the benchmark's pages lack to run (``None``: nothing): Playwright, installed with
     the test extras (``pip install -e '.[test]'``, as ``make`` does), and Chromium at
-    :data:`CHROMIUM`."""
+    :data:`dashboard.bench.streaming.CHROMIUM`."""
+    from dashboard.bench import streaming
+
     if importlib.util.find_spec("playwright") is None:
         return "Playwright: pip install -e '.[test]' (make does)"
-    if not os.access(CHROMIUM, os.X_OK):
-        return f"Chromium at {CHROMIUM}: apt-get install chromium"
+    if not os.access(streaming.CHROMIUM, os.X_OK):
+        return f"Chromium at {streaming.CHROMIUM}: apt-get install chromium"
     return None

@@ -33,7 +33,9 @@ from agent.platform.goals import Goal, Sense
 from agent.platform.protocol import Estimates, Keys, Phase, Truth, encode
 from agent.platform.statistics import percentile
 from agent.platform.zenoh_session import ZenohSettings, open_session
-from dashboard.bench.cli import CHROMIUM
+
+CHROMIUM = "/usr/bin/chromium"
+"""The browser the benchmark's pages run in (Debian's ``chromium`` package)."""
 
 BROWSER_ARGS = ["--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-sync"]
 GOALS = (

@@ -561,8 +561,8 @@ function drawTable(scene) {
     rows.push(`<tr title="${c}"><td><span class="swatch" style="background:${colour(Number(robot))}"></span>${robot}</td>`
       + `<td style="color:${PHASE_COLOURS[row.phase] || "inherit"}"`
       + ` title="probe score: ${row.change_score == null ? "–" : fmt(row.change_score, 1) + " σ"}">`
-      + `${row.phase}${row.load_changes ? ` <span class="epoch">(load changes: ${row.load_changes})</span>` : ""}`
-      + `${row.rejoins ? ` <span class="epoch">(begun again: rejoin ${row.rejoins})</span>` : ""}</td>`
+      + `${row.phase}${row.load_changes ? ` <span class="restarts">(load changes: ${row.load_changes})</span>` : ""}`
+      + `${row.rejoins ? ` <span class="restarts">(begun again: rejoin ${row.rejoins})</span>` : ""}</td>`
       + `<td>${fmt(row.mass, 4)}</td><td>${fmt(row.moment, 4)}</td>`
       + `<td>${fmt(scaled(e.mass_rel, 100), 3)}</td><td>${fmt(scaled(e.moment_rel, 100), 3)}</td>`
       + `<td>${fmt(scaled(e.contact_to_com_m, 1000), 2)}</td>`

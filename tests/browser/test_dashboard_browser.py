@@ -148,7 +148,7 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
     scenario = load_scenario(PAPER)
     # As heft demo does: the dashboard up before the run, then the recorder and the dashboard
     # subscribed once the run's router is up, before the plant and the agents start.
-    companion = RunCompanion.open(scenario, tmp_path / "paper.mcap", dashboard=True, port=0)
+    companion = RunCompanion.open(tmp_path / "paper.mcap", dashboard=True, port=0)
     display = companion.display
     with open_session(ZenohSettings(mode="router", connect=(), listen=(router,))) as session:
         processes = None

@@ -261,6 +261,13 @@ class Rig:
     def wait(self, condition, timeout: float, what: str) -> BridgeStatus:
         return self.rig.wait_status(condition, timeout, what)
 
+    def kill_agent(self) -> None:
+        """``kill -9`` the rig's echo agent, as a crash would end it (``start_agent`` brings
+        it back)."""
+        agent = self.rig.children.pop("echo agent")
+        agent.process.kill()
+        agent.stop()
+
     def _heartbeat(self) -> None:
         self.send(CODEC.encode(Heartbeat(1, self.beats % 16, 2)))
         self.beats += 1
@@ -329,7 +336,7 @@ def test_the_watchdog_commands_zero_force_when_the_agent_is_killed(rig: Rig) -> 
     rig.wait(lambda s: not s.watchdog, 30, "the watchdog is clear")
     rig.frames.clear()
     time.sleep(0.5)
-    rig.rig.kill_agent()
+    rig.kill_agent()
     tripped = rig.wait(lambda s: s.watchdog, 10, "the watchdog trips")
     time.sleep(0.3)
     frames = list(rig.frames)

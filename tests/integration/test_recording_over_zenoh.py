@@ -1,6 +1,7 @@
 """``heft record`` over Zenoh, as a process beside a team publishing on a router: it keeps every
-robot's measurements and commands, closes its file on SIGTERM and leaves it readable up to the
-cut when killed with SIGKILL; and the live display follows a team and drops what is forged."""
+robot's measurements and commands and the plant's load geometry, closes its file on SIGTERM and
+leaves it readable up to the cut when killed with SIGKILL; and the live display follows a team,
+draws the load the plant describes and drops what is forged."""
 
 from __future__ import annotations
 
@@ -15,7 +16,15 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from agent.platform.protocol import Command, Estimates, Keys, Measurement, Phase, encode
+from agent.platform.protocol import (
+    Command,
+    Estimates,
+    Keys,
+    LoadGeometry,
+    Measurement,
+    Phase,
+    encode,
+)
 from agent.platform.zenoh_session import ZenohSettings, open_session
 from dashboard.replay import Recording, Replayer
 from dashboard.state import TeamState
@@ -31,9 +40,14 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+GEOMETRY = LoadGeometry(2, ((-1.0, -0.5), (1.0, -0.5), (0.0, 1.0)), ((1, 2),), 0.005)
+"""The load the fake team's plant describes."""
+
+
 class Team:
     """A router in this process and a fake team publishing on it at 200 Hz: measurements,
-    commands and estimates of robots 1 and 2."""
+    commands and estimates of robots 1 and 2, and every 20 ticks the load's geometry (as the
+    plant does with each of its statuses)."""
 
     def __init__(self, team: str):
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -54,6 +68,8 @@ class Team:
                 put(keys.force(i), encode(Command(i, k, (1.0, -1.0))))
                 put(keys.estimate(i), encode(Estimates(i, k, Phase.EXCITE, omega=0.01 * k)))
             put(keys.force(1), b"forged")  # counted and dropped, never recorded
+            if k % 20 == 0:
+                put(keys.geometry(), encode(GEOMETRY))
             self.tick = k + 1
             time.sleep(0.005)
 
@@ -91,8 +107,12 @@ def read_all(path: Path) -> tuple[Recording, list]:
 
 
 def check_stream(messages: list) -> None:
-    """Both robots' measurements, commands and estimates, every tick in order."""
-    kinds = {(type(r.message).__name__, r.key.split("/")[3]) for r in messages}
+    """Both robots' measurements, commands and estimates, every tick in order, and the load's
+    geometry."""
+    geometries = [r.message for r in messages if isinstance(r.message, LoadGeometry)]
+    assert geometries and set(geometries) == {GEOMETRY}
+    robots = [r for r in messages if not isinstance(r.message, LoadGeometry)]
+    kinds = {(type(r.message).__name__, r.key.split("/")[3]) for r in robots}
     assert kinds == {(k, i) for k in ("Measurement", "Command", "Estimates") for i in "12"}
     ticks = [r.message.tick for r in messages if isinstance(r.message, Measurement)]
     assert ticks == sorted(ticks)
@@ -126,7 +146,7 @@ def test_a_recording_killed_with_sigkill_replays_up_to_the_cut(tmp_path: Path) -
     recording, messages = read_all(path)
     assert not recording.rejected
     check_stream(messages)
-    last = max(r.message.tick for r in messages)
+    last = max(r.message.tick for r in messages if hasattr(r.message, "tick"))
     # Chunks are flushed every 0.5 s: at most that (and a little scheduling) was lost.
     assert killed_at - last < 0.5 / 0.005 + 100, (killed_at, last)
     # And it replays: the dashboard's state follows it to its last estimates.
@@ -147,7 +167,8 @@ def test_the_live_display_follows_a_team_and_drops_what_is_forged() -> None:
             deadline = time.monotonic() + 20
             while time.monotonic() < deadline:
                 robots = display.hub.snapshot()["robots"]
-                if {"1", "2"} <= set(robots) and display.feed.rejects.total > 10:
+                heard = display.hub.state.geometry is not None
+                if {"1", "2"} <= set(robots) and display.feed.rejects.total > 10 and heard:
                     break
                 time.sleep(0.1)
             snapshot = display.hub.snapshot()
@@ -155,6 +176,7 @@ def test_the_live_display_follows_a_team_and_drops_what_is_forged() -> None:
             assert snapshot["robots"]["1"]["omega"] == pytest.approx(
                 0.01 * snapshot["robots"]["1"]["tick"]
             )
+            assert display.hub.state.geometry == GEOMETRY  # the outline, from the plant
             assert display.feed.rejects.counts["force"] > 10  # the forged payloads
             assert display.feed.failures == 0
         finally:

@@ -310,9 +310,9 @@ def test_a_slow_start_is_not_a_stall(monkeypatch) -> None:
 # ------------------------------------------------------------------------------ stopping
 SIGNAL_TO_ANOTHER_THREAD = """
 import os, signal, threading
-from agent.platform.process import stop_on_signals
+from agent.platform.process import StopSignals
 
-stop = stop_on_signals()
+stop = StopSignals().handle().event
 threading.Thread(target=threading.Event().wait, args=(60,), daemon=True).start()
 signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})  # only that thread can take it
 os.kill(os.getpid(), signal.SIGTERM)
@@ -325,11 +325,32 @@ def test_a_stop_signal_taken_by_another_thread_still_stops_the_wait() -> None:
     """The kernel hands SIGTERM to a thread other than the main one (as it may to Zenoh's or
     the log relay's): the main thread's ``stop.wait()`` still returns (with a plain
     ``threading.Event`` it waits for ever)."""
-    done = subprocess.run(
-        [sys.executable, "-c", SIGNAL_TO_ANOTHER_THREAD],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=20,
-    )
+    done = _python(SIGNAL_TO_ANOTHER_THREAD)
     assert (done.returncode, done.stdout) == (0, "stopped\n"), done.stderr
+
+
+def _python(script: str) -> subprocess.CompletedProcess:
+    """``script`` run by a Python of its own (its signals and threads its own)."""
+    return subprocess.run(
+        [sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=20
+    )
+
+
+SIGNAL_TAKEN_BY_SIGWAIT = """
+import os, signal, threading
+from agent.platform.process import StopSignals
+
+stop = StopSignals().take()
+waiting = threading.Thread(target=threading.Event().wait, args=(60,), daemon=True)
+waiting.start()  # a thread started after: it inherits the mask, the signal is not its
+os.kill(os.getpid(), signal.SIGHUP)
+stop.event.wait()
+print(stop.received.name, signal.getsignal(signal.SIGHUP) is signal.SIG_DFL)
+"""
+
+
+def test_stop_signals_taken_by_sigwait_set_the_event_with_no_handler() -> None:
+    """The AGV bridge's way: the signals blocked, taken by a thread of their own with
+    ``sigwait``; SIGHUP, whose default would end the process, sets the event instead."""
+    done = _python(SIGNAL_TAKEN_BY_SIGWAIT)
+    assert (done.returncode, done.stdout) == (0, "SIGHUP True\n"), done.stderr

@@ -1,17 +1,23 @@
 """``heft vcan`` for real (marked slow, each boots a User-Mode Linux guest in ~3-5 s where this
 kernel has no CAN): exit status and output passed through, vcan1 there, a CAN frame crossing
-processes on it, ``--check`` and a bad ``--memory``."""
+processes on it, ``--check`` and a bad ``--memory``; and a stop signal passed on to the command
+it runs natively."""
 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import textwrap
+import threading
+import time
 from pathlib import Path
 
 import pytest
 
+from agent.platform.process import STOP_SIGNALS
+from bridge.devtools import vcan_run
 from tests.helpers.paths import ROOT
 
 
@@ -100,3 +106,22 @@ def test_a_frame_crosses_processes_on_vcan1(vcan_here: str, tmp_path: Path) -> N
     done = _heft("vcan", "--count", "2", "--timeout", "90", "--", sys.executable, str(script))
     assert done.returncode == 0, done.stderr
     assert done.stdout == "received 123 010203\n", done.stderr
+
+
+def test_a_stop_signal_is_passed_on_to_the_command_and_is_the_exit_status(tmp_path) -> None:
+    """Natively (the command run where vcan already is), SIGTERM to ``heft vcan`` reaches the
+    command, and ``heft vcan`` answers 128 + 15 once it has ended; its handlers are put back."""
+    ready, heard = tmp_path / "ready", tmp_path / "heard"
+    script = f"trap 'echo TERM > {heard}; kill $!; exit 0' TERM; touch {ready}; sleep 60 & wait"
+    main = threading.main_thread().ident
+
+    def stop_once_it_runs() -> None:
+        while not ready.exists():
+            time.sleep(0.01)
+        signal.pthread_kill(main, signal.SIGTERM)  # where heft vcan waits for the command
+
+    before = [signal.getsignal(sig) for sig in STOP_SIGNALS]
+    threading.Thread(target=stop_once_it_runs, daemon=True).start()
+    assert vcan_run._run_child(["sh", "-c", script], None) == 128 + signal.SIGTERM
+    assert heard.read_text() == "TERM\n"
+    assert [signal.getsignal(sig) for sig in STOP_SIGNALS] == before

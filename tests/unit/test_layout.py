@@ -1,6 +1,7 @@
-"""The product's layout: its top-level packages and nothing else, no import cycle between its
-modules, and one ``heft`` command listing every package's commands. (Light modules that stay
-light, in fresh interpreters: tests/integration/test_import_weight.py.)"""
+"""The product's layout: its top-level packages and nothing else, its packages in layers that
+import only downwards (function-level and ``TYPE_CHECKING`` imports included), no import cycle
+between its modules, and one ``heft`` command listing every package's commands. (Light modules
+that stay light, in fresh interpreters: tests/integration/test_import_weight.py.)"""
 
 from __future__ import annotations
 
@@ -20,6 +21,22 @@ PRODUCT_PACKAGES = ("agent", "simulator", "bridge", "dashboard")
 TOP_LEVEL = {*PRODUCT_PACKAGES, "tests", "deploy"}
 COMMANDS = {"run", "scenario", "bench", "agent", "sim", "router", "demo", "deploy"}
 BENCHMARKS = {"accuracy", "generated", "zenoh", "noise", "sweep", "changes", "can", "dashboard"}
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("agent.platform",),
+    ("agent.security", "agent.algorithm"),
+    ("agent",),
+    ("bridge", "dashboard"),
+    ("simulator",),
+)
+"""The product's units, lowest first: a module imports only from its own unit and from units
+of lower layers; the units of one layer do not import each other. A unit is a package less
+its sub-packages that are units of their own (``agent`` is ``agent.node``, ``agent.cli`` and
+``agent.__main__``). The platform (protocol, config, Zenoh, processes) stands on nothing of
+the project; security (certificates, access control) and the robot's algorithm on the
+platform; the agent's process and commands on both; the AGV bridge and the dashboard beside
+each other on the agent; the simulator, which runs the others (plant, launcher, benchmarks,
+the run's recording and dashboard), on top. ``heft`` finds each package's commands and
+benchmarks through entry points (``agent.platform.dispatch``), not imports."""
 
 
 # ------------------------------------------------------------------------------ the tree
@@ -50,14 +67,17 @@ def test_the_distribution_ships_only_the_products_packages() -> None:
 
 
 # ------------------------------------------------------------------------------ import graph
-def project_modules() -> dict[str, Path]:
-    """Every module of the product's packages, by dotted name (a package by its own name)."""
+def project_modules(
+    root: Path = ROOT, packages: tuple[str, ...] = PRODUCT_PACKAGES
+) -> dict[str, Path]:
+    """Every module of ``packages`` under ``root``, by dotted name (a package by its own
+    name)."""
     modules = {}
-    for package in PRODUCT_PACKAGES:
-        if not (ROOT / package / "__init__.py").is_file():
+    for package in packages:
+        if not (root / package / "__init__.py").is_file():
             continue
-        for path in sorted((ROOT / package).rglob("*.py")):
-            parts = path.relative_to(ROOT).with_suffix("").parts
+        for path in sorted((root / package).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
             if parts[-1] == "__init__":
                 parts = parts[:-1]
             modules[".".join(parts)] = path
@@ -84,9 +104,11 @@ def imported_names(path: Path, module: str) -> set[str]:
     return names
 
 
-def import_graph() -> dict[str, set[str]]:
-    """Module -> the product modules it imports."""
-    modules = project_modules()
+def import_graph(
+    root: Path = ROOT, packages: tuple[str, ...] = PRODUCT_PACKAGES
+) -> dict[str, set[str]]:
+    """Module -> the modules of ``packages`` it imports."""
+    modules = project_modules(root, packages)
     return {
         name: {other for other in imported_names(path, name) if other in modules} - {name}
         for name, path in modules.items()
@@ -113,6 +135,72 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
                 path.append(nxt)
                 stack.append(iter(sorted(graph.get(nxt, ()))))
     return None
+
+
+def unit_of(module: str, layers: tuple[tuple[str, ...], ...]) -> str | None:
+    """The unit of ``layers`` that ``module`` belongs to (the longest that prefixes it)."""
+    units = [u for layer in layers for u in layer if module == u or module.startswith(u + ".")]
+    return max(units, key=len, default=None)
+
+
+def upward_imports(
+    graph: dict[str, set[str]], layers: tuple[tuple[str, ...], ...]
+) -> list[tuple[str, str]]:
+    """Every ``(importer, imported)`` of ``graph`` that does not go to the importer's own unit
+    or to a lower layer (an import within a layer, between two units, is one too); a module
+    in no unit imports ``None``."""
+    rank = {unit: i for i, layer in enumerate(layers) for unit in layer}
+    wrong = []
+    for module, imported in sorted(graph.items()):
+        here = unit_of(module, layers)
+        if here is None:
+            wrong.append((module, None))
+            continue
+        for other in sorted(imported):
+            there = unit_of(other, layers)
+            if there != here and (there is None or rank[there] >= rank[here]):
+                wrong.append((module, other))
+    return wrong
+
+
+def test_upward_imports_are_found_wherever_they_are(tmp_path: Path) -> None:
+    files = {
+        "low/__init__.py": "",
+        "low/base.py": "def f():\n    from high import top\n",  # upwards, in a function
+        "low/sub/__init__.py": "from low import base\n",
+        "high/__init__.py": "",
+        "high/top.py": "import low.base\nfrom low.sub import thing\n",  # downwards
+        "side/__init__.py": "",
+        "side/x.py": (
+            "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from high.top import T\n"
+        ),
+        "loose/__init__.py": "",
+    }
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text, encoding="utf-8")
+    graph = import_graph(tmp_path, ("low", "high", "side", "loose"))
+    layers = (("low",), ("high", "side"))
+    assert upward_imports(graph, layers) == [
+        ("loose", None),
+        ("low.base", "high"),
+        ("low.base", "high.top"),
+        ("side.x", "high.top"),  # a unit of the same layer
+    ]
+    assert upward_imports(graph, (("low.sub",), ("low",), ("high", "side", "loose"))) == [
+        ("low.base", "high"),
+        ("low.base", "high.top"),
+        ("low.sub", "low"),  # a sub-package that is a unit of its own, below its parent
+        ("low.sub", "low.base"),
+        ("side.x", "high.top"),
+    ]
+
+
+def test_every_import_goes_down_the_layers() -> None:
+    graph = import_graph()
+    assert "dashboard.cli" in graph and "simulator.baseline" in graph
+    assert "agent.platform.dispatch" in graph["simulator.cli"]  # a function-level import
+    assert upward_imports(graph, LAYERS) == []
 
 
 def test_find_cycle() -> None:

@@ -19,8 +19,3 @@ from __future__ import annotations
 def metropolis_weight(degree_i: int, degree_j: int) -> float:
     """``a_ij = 1 / (1 + max(d_i, d_j))``."""
     return 1.0 / (1.0 + max(degree_i, degree_j))
-
-
-def consensus_term(a: float, state: float, neighbour_state: float) -> float:
-    """Edge ``ij``'s term of the update, ``a_ij (ξ_j − ξ_i)``."""
-    return a * (neighbour_state - state)

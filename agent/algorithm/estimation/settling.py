@@ -107,7 +107,7 @@ class SettleDetector:
 
 ITERATED = {0, 1, 2, 3}
 """The detectors (by position in :class:`SettleDetectors`) judged by their drift as well:
-the distances, the centroid, the spread and ``Ĵ``, each of which a noise-free run would
+the distances, the centroid, ``ξ_i`` and ``Ĵ``, each of which a noise-free run would
 otherwise call settled on its first window (their uncertainty then is nil, not their error).
 ``z_C`` and ``m̂``, judged by uncertainty alone, settle within 20 s at 1 cm/s."""
 
@@ -120,8 +120,8 @@ class SettleDetectors:
     """Step 1 (and 3): every ``‖z_ij‖``."""
     centroid: SettleDetector
     """Step 2: ``z_i`` in the frame of the longest edge (constant once converged)."""
-    spread: SettleDetector
-    """``ξ_i = w / n`` (eq. 16)."""
+    mean_square_offset: SettleDetector
+    """``ξ_i = w / n`` (eq. 16), the team quantity of that name."""
     moment: SettleDetector
     """Step 4: ``Ĵ``."""
     com_offset: SettleDetector

@@ -70,9 +70,9 @@ class RobustPipeline(EstimationPipeline):
     @property
     def _torque_gain(self) -> float:
         """``q / (w/n)``: how much more torque the drives applied in Step 4 than commanded."""
-        spread = self.mean_square_offset
+        xi = self.mean_square_offset
         weighted = self.consensus["mean_gain_square_offset"]
-        return weighted / spread if spread > 0.0 and weighted > 0.0 else 1.0
+        return weighted / xi if xi > 0.0 and weighted > 0.0 else 1.0
 
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C`` corrected for the drives' gains. The torque of the push about the COM is
@@ -214,8 +214,8 @@ class RobustPipeline(EstimationPipeline):
         assumes (``±k w``) and so ``Ĵ``: ``2 σ_z / ‖z_i‖`` per robot, ``σ_z`` the mean of
         this robot's edges' (the others' taken alike), averaged over ``n`` robots."""
         stds = [edge.std for edge in self.edges.values() if edge.std is not None]
-        spread = self.mean_square_offset
-        size = math.sqrt(spread) if spread > 0.0 else 0.0
+        xi = self.mean_square_offset
+        size = math.sqrt(xi) if xi > 0.0 else 0.0
         if not stds or size == 0.0:
             return 0.0
         return 2.0 * (sum(stds) / len(stds)) / size / math.sqrt(self.n)

@@ -122,7 +122,7 @@ class RotationConsensus:
         instant, level, ν_j)`` from its latest message; ``level_at(e)`` gives this robot's
         own level at instant ``e`` (``None`` if forgotten). Returns the team's turn, the step
         ``θ_i(e) − θ_i(e−1)``."""
-        correction = spread = 0.0
+        correction = variance_change = 0.0
         used = self._used
         now = instant
         for j, degree, level_instant, level, their_variance in heard:
@@ -134,10 +134,10 @@ class RotationConsensus:
             used[j] = level_instant
             a = metropolis_weight(self.degree, degree) * delay_factor(now - 1 - level_instant)
             correction += a * wrapped(level - mine)
-            spread += a * (their_variance - self.variance)
+            variance_change += a * (their_variance - self.variance)
         if variance is not None:
             variance = min(max(variance, 0.0), MAX_OWN_VARIANCE)
-            spread += variance - self._variance_input
+            variance_change += variance - self._variance_input
             self._variance_input = variance
-        self.variance += spread
+        self.variance += variance_change
         return turn + correction

@@ -280,7 +280,6 @@ def test_in_memory_transport_delivers_to_neighbours_only(kind):
     transport = InMemoryTransport(n, edges)
     for sender in range(1, n + 1):
         transport.send(Share(sender=sender, tick=sender, velocity=(float(sender), 0.0), degree=0))
-    assert transport.delivered == 2 * len(edges)
     for robot in range(1, n + 1):
         got = transport.receive(robot)
         senders = [s.sender for s in got]

@@ -221,7 +221,7 @@ def test_unit_restarts_on_what_its_command_says_is_worth_it(unit: Path, heft) ->
 
 def test_a_halted_agent_is_restarted_and_rejoins(heft) -> None:
     """Exit status 3 (the team halted) is no longer final: a restarted agent rejoins its team,
-    which begins again in a new generation (deploy/README.md, "Faults")."""
+    which begins again, one more rejoin (deploy/README.md, "Faults")."""
     assert 3 in exit_statuses(heft, "agent")
     prevented = service(DEPLOY / "systemd" / "heft-agent@.service")["RestartPreventExitStatus"]
     assert "3" not in " ".join(prevented).split()

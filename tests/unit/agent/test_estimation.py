@@ -484,10 +484,10 @@ class Member(TeamConsensus):
         self.gain_input, self.mass_input = 1.0, (0.0, 0.0)
         super().__init__(robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input))
 
-    spread = property(lambda self: self["mean_square_offset"])
+    xi = property(lambda self: self["mean_square_offset"])
     gain = property(lambda self: self["mean_gain"])
-    gain_centroid = property(lambda self: self["mean_gain_offset"])
-    gain_spread = property(lambda self: self["mean_gain_square_offset"])
+    h = property(lambda self: self["mean_gain_offset"])
+    q = property(lambda self: self["mean_gain_square_offset"])
 
     def team_mass(self, own: float):
         return team_mass(self["mean_mass_information"], self["mean_weighted_mass"], own)
@@ -543,14 +543,14 @@ def test_centroid_consensus_converges_to_offsets_and_w(kind, turn):
     p = np.random.default_rng(21).uniform(-3, 3, size=(n, 2))
     for team in run_consensus(p, graph(kind, n), 3000, turn):
         x = np.array([c.centroid for c in team.values()])
-        xi = [c.spread for c in team.values()]
+        xi = [c.xi for c in team.values()]
         assert np.abs(x.sum(axis=0)).max() < 1e-12  # Σ x_i = 0
         assert sum(xi) == pytest.approx(float((x**2).sum()), abs=1e-9)  # Σ ξ_i = Σ ‖x_i‖²
     truth = offsets(p, turn, 2999)
     assert np.abs(x - truth).max() < 1e-9
     w = float((truth**2).sum())
     for c in team.values():
-        assert c.spread == pytest.approx(w / n, abs=1e-9)
+        assert c.xi == pytest.approx(w / n, abs=1e-9)
 
 
 @pytest.mark.parametrize("lossy", [False, True])
@@ -570,8 +570,8 @@ def test_the_drives_gains_averages(lossy):
     q = float((gains * (z**2).sum(axis=1)).sum()) / n
     for c in team.values():
         assert c.gain == pytest.approx(float(gains.mean()), abs=1e-9)
-        assert c.gain_centroid == pytest.approx(tuple(h), abs=1e-9)
-        assert c.gain_spread == pytest.approx(q, abs=1e-9)
+        assert c.h == pytest.approx(tuple(h), abs=1e-9)
+        assert c.q == pytest.approx(q, abs=1e-9)
     assert np.linalg.norm(h) > 0.01  # not the unweighted centroid's zero
 
 
@@ -652,7 +652,7 @@ def test_centroid_consensus_keeps_its_sums_under_message_loss(kind):
     truth = offsets(p, turn, rounds - 1)
     assert np.abs(x - truth).max() < 1e-9
     w = float((truth**2).sum())
-    assert all(c.spread == pytest.approx(w / n, abs=1e-9) for c in team.values())
+    assert all(c.xi == pytest.approx(w / n, abs=1e-9) for c in team.values())
     plain = _plain_centroid(p, edges, rounds, _lossy(n, edges, rounds, 0.2, seed=5))
     assert np.abs(plain.sum(axis=0)).max() > 1e-3
 
@@ -678,7 +678,7 @@ def test_centroid_consensus_one_update_by_hand():
         rot(3 * phi) @ x2 + frame.relative_position(2)
     )
     assert c.centroid == pytest.approx(tuple(expected), abs=1e-12)
-    assert c.spread == pytest.approx(a1 * 0.8 + a2 * -0.2 + expected @ expected, abs=1e-12)
+    assert c.xi == pytest.approx(a1 * 0.8 + a2 * -0.2 + expected @ expected, abs=1e-12)
 
 
 def test_centroid_consensus_adopts_each_neighbour_flow_once():
@@ -703,14 +703,14 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
     xi = x @ x + 0.25
     ds1 = 0.5 * (2.0 - xi)
     assert c.centroid == pytest.approx(tuple(x), abs=1e-12)
-    assert c.spread == pytest.approx(x @ x + 0.25 + ds1, abs=1e-12)
+    assert c.xi == pytest.approx(x @ x + 0.25 + ds1, abs=1e-12)
     frame.instant = t + 1
     c.update(phi, {1: theirs}, frame)
     x = rot(phi) @ x
     assert c.centroid == pytest.approx(tuple(x), abs=1e-12)
     xi = x @ x + 0.25 + ds1
     ds2 = 0.5 * (2.0 - xi)
-    assert c.spread == pytest.approx(x @ x + 0.25 + ds1 + ds2, abs=1e-12)
+    assert c.xi == pytest.approx(x @ x + 0.25 + ds1 + ds2, abs=1e-12)
     ((j, *flow),) = c.shared_flows()
     assert j == 1
     assert flow[:3] == pytest.approx([-x[0], -x[1], -0.25 - ds1 - ds2], abs=1e-12)

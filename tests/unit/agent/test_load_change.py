@@ -14,7 +14,6 @@ import pytest
 from agent.algorithm.coordination import PhaseBarrier
 from agent.algorithm.robust.load_change import ProbeFit
 from agent.platform.protocol import Barrier, Phase, Share, decode, encode
-from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
 from simulator.inprocess import run_inprocess
 from simulator.plant import Plant
@@ -47,8 +46,9 @@ def test_events_are_read_checked_and_written_back() -> None:
         LoadChange(at_s=40.0, com=(0.1, -0.1)),
     )
     assert scenario.end_s == 48.0 and scenario.end_tick == 4800
-    assert scenario.body_at(35.0).mass == 6.0 and scenario.body_at(35.0).com == scenario.body.com
-    assert scenario.body_at(45.0).com == (0.1, -0.1)
+    after_first = scenario.events[0].applied_to(scenario.body)
+    assert after_first.mass == 6.0 and after_first.com == scenario.body.com
+    assert scenario.events[1].applied_to(after_first).com == (0.1, -0.1)
     assert parse_scenario(tomllib.loads(scenario_to_toml(scenario))) == scenario
 
 
@@ -183,18 +183,18 @@ def test_one_robot_restarts_the_team_and_every_robot_restarts_at_the_same_tick()
     assert all(b.load_changes == 1 and b.phase == Phase.INERTIA for b in barriers.values())
 
 
-def test_a_later_epoch_is_caught_up_with_and_halted_beats_every_epoch() -> None:
+def test_more_load_changes_are_caught_up_with_and_halted_beats_any_number() -> None:
     b = PhaseBarrier(1, 2, 0)
     b.phase = Phase.DONE
     b.step(10, False, [Barrier(phase=Phase.EXCITE, load_changes=2)])
     assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)
     b.step(11, False, [Barrier(phase=Phase.DONE, load_changes=1)])
-    assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)  # an older epoch is not gone back to
+    assert (b.phase, b.load_changes) == (Phase.EXCITE, 2)  # fewer load changes: not gone back
     b.step(12, False, [Barrier(phase=Phase.HALTED, load_changes=0)])
     assert b.phase == Phase.HALTED
 
 
-def test_the_epoch_crosses_the_wire_and_is_domain_checked() -> None:
+def test_the_load_changes_cross_the_wire_and_are_domain_checked() -> None:
     share = Share(1, 5, (0.0, 0.0), 1, barrier=Barrier(load_changes=7))
     assert decode(Share, encode(share)).barrier.load_changes == 7
     with pytest.raises(ValueError, match="share.barrier.load_changes"):
@@ -232,7 +232,7 @@ def test_a_changed_load_is_noticed_within_5_s_and_estimated_again(seed, change) 
     assert results_dict(outcome)["floor"]["within"]
     assert "restarted" in format_table(outcome)
     # The dashboard, fed the run, ends on the same final instant: the one after the restart.
-    state = TeamState("changing", LoadGeometry.from_scenario(outcome.scenario))
+    state = TeamState("changing", outcome.scenario.load_geometry())
     for sample in [*outcome.history, outcome.final]:
         state.ingest(sample.truth, sample.truth.time_s)
         for est in sample.estimates.values():

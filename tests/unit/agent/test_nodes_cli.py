@@ -24,16 +24,20 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from agent.algorithm.tuning import AgentTuning
 from agent.node import AgentNodeConfig, load_agent_config
 from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_settings
-from agent.platform.config import ConfigError, from_table
+from agent.platform.config import ConfigError, from_table, toml_value
 from agent.platform.dispatch import main
 from agent.platform.faults import FaultSettings
 from agent.platform.protocol import CLOCKS
 from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings, zenoh_config
-from simulator.launcher import robot_toml
+from bridge.config import CanSettings, can_table
+from simulator.can_drivers import CanLink
+from simulator.launcher import can_settings, robot_toml
 from simulator.scenario import load_scenario
 from tests.helpers.paths import PAPER, ROOT
 from tests.helpers.tls import loadable_copy
@@ -306,6 +310,18 @@ def test_launcher_robot_toml_round_trips(robot: int, paper) -> None:
     )
     assert config.neighbours == {1: (2,), 2: (1, 3), 3: (2, 4), 4: (3,)}[robot]
     assert config.tuning == AgentTuning()
+
+
+@given(st.text(st.characters(exclude_categories=("Cs",))))
+def test_a_toml_string_reads_back_as_written(text: str) -> None:
+    assert tomllib.loads(f"x = {toml_value(text)}") == {"x": text}
+
+
+def test_the_launchers_can_table_reads_back_whatever_the_names() -> None:
+    settings = can_settings(3, CanLink(interface="socketcan", channel='can\\"{robot}'), 50)
+    assert settings.channel == 'can\\"3' and settings.node == 3 and settings.watchdog_ms == 50
+    table = tomllib.loads(can_table(settings))["can"]
+    assert from_table(CanSettings, table, "can") == settings
 
 
 def test_launcher_robot_toml_carries_faults_and_tuning(paper) -> None:

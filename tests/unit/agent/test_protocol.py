@@ -25,6 +25,7 @@ from agent.platform.protocol import (
     DecodeError,
     Estimates,
     Keys,
+    LoadGeometry,
     Measurement,
     Phase,
     PlantStatus,
@@ -37,7 +38,7 @@ from agent.platform.protocol import (
 from agent.platform.team import ConsensusState
 
 STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
-JSON_CLASSES = (Status, Truth, Control, PlantStatus, BridgeStatus)
+JSON_CLASSES = (Status, Truth, Control, PlantStatus, BridgeStatus, LoadGeometry)
 ALL_KINDS = (*STRUCT_KINDS, *JSON_CLASSES)
 KIND_BYTE = {
     Measurement: 1,
@@ -50,6 +51,7 @@ KIND_BYTE = {
     Control: 8,
     PlantStatus: 9,
     BridgeStatus: 10,
+    LoadGeometry: 11,
 }
 NOT_FINITE = (math.nan, math.inf, -math.inf)
 
@@ -181,6 +183,13 @@ TRUTH = Truth(
 CONTROL = Control("stop")
 PLANT_STATUS = PlantStatus(tick=6000, time_s=60.0, clock="realtime", lost=(2,), latency_ms_p50=0.4)
 BRIDGE_STATUS = BridgeStatus(robot=2, tick=77, watchdog=True, watchdog_trips=1, frames_in=154)
+GEOMETRY = LoadGeometry(
+    n=3,
+    outline=((-1.5, -0.5), (1.5, -0.5), (0.25, 1.0)),
+    edges=((1, 2), (2, 3)),
+    period_s=0.01,
+    end_tick=1200,
+)
 
 MESSAGES = {
     "measurement": MEASUREMENT,
@@ -198,6 +207,7 @@ MESSAGES = {
     "truth": TRUTH,
     "control": CONTROL,
     "plant-status": PLANT_STATUS,
+    "load-geometry": GEOMETRY,
     "bridge-status": BRIDGE_STATUS,
 }
 
@@ -436,6 +446,31 @@ def test_json_messages_are_checked_too() -> None:
     assert "largest_speed" in str(rejects(Truth, encode(_with(TRUTH, largest_speed=-0.1))))
 
 
+NOT_GEOMETRIES = {
+    "one robot": dict(n=1),
+    "more robots than a team has": dict(n=33),
+    "two vertices": dict(outline=((0.0, 0.0), (1.0, 0.0))),
+    "a vertex far away": dict(outline=((0.0, 0.0), (1.0, 0.0), (0.0, 1e4))),
+    "an edge to robot 4 of 3": dict(edges=((1, 2), (3, 4))),
+    "an edge backwards": dict(edges=((2, 1),)),
+    "an edge twice": dict(edges=((1, 2), (1, 2))),
+    "a period of a second and more": dict(period_s=1.5),
+    "a negative end": dict(end_tick=-1),
+}
+
+
+@pytest.mark.parametrize("changes", NOT_GEOMETRIES.values(), ids=NOT_GEOMETRIES.keys())
+def test_a_load_geometry_out_of_its_domain_is_refused(changes: dict) -> None:
+    assert "load_geometry" in str(rejects(LoadGeometry, encode(_with(GEOMETRY, **changes))))
+
+
+def test_a_load_geometry_places_its_outline_at_the_truths_pose() -> None:
+    square = LoadGeometry(2, ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0)), ((1, 2),), 0.01)
+    turned = square.world_outline((10.0, 20.0), math.pi / 2)
+    flat = [v for vertex in turned for v in vertex]
+    assert flat == pytest.approx([10.0, 21.0, 9.0, 20.0, 10.0, 19.0])
+
+
 # ----------------------------------------------------------------------------- DecodeError
 @pytest.mark.parametrize("kind", ALL_KINDS, ids=kind_id)
 @pytest.mark.parametrize("payload", [b"", b"H", b"H\x01"], ids=["empty", "1-byte", "2-byte"])
@@ -456,6 +491,7 @@ def _sample_payload(kind) -> bytes:
             Control: CONTROL,
             PlantStatus: PLANT_STATUS,
             BridgeStatus: BRIDGE_STATUS,
+            LoadGeometry: GEOMETRY,
         }[kind]
     )
 
@@ -480,7 +516,7 @@ def test_every_other_kind_is_refused(kind) -> None:
     for other in ALL_KINDS:
         if other != kind:
             assert "kind" in str(rejects(kind, _sample_payload(other)))
-    for unknown in (0, 11, 255):
+    for unknown in (0, max(KIND_BYTE.values()) + 1, 255):
         assert "kind" in str(rejects(kind, _sample_payload(kind)[:2] + bytes([unknown])))
 
 
@@ -675,7 +711,12 @@ def test_json_that_is_not_an_object(kind, body: bytes) -> None:
 def test_non_finite_numbers_in_json_messages(kind, number: str) -> None:
     # encode/encode_json never write these (allow_nan=False), so no valid message has one.
     body = json.loads(_sample_payload(kind)[3:]) | ({"mass": 5.0} if kind is Control else {})
-    key = {Status: "rejected", PlantStatus: "time_s", BridgeStatus: "frames_in"}.get(kind, "mass")
+    key = {
+        Status: "rejected",
+        PlantStatus: "time_s",
+        BridgeStatus: "frames_in",
+        LoadGeometry: "period_s",
+    }.get(kind, "mass")
     text = json.dumps(body).replace(f'"{key}": {json.dumps(body[key])}', f'"{key}": {number}')
     assert number in text
     rejects(kind, header(kind) + text.encode())
@@ -784,6 +825,7 @@ def test_key_shapes() -> None:
     assert keys.clock() == "heft/paper/plant/clock"
     assert keys.truth() == "heft/paper/plant/truth"
     assert keys.plant_status() == "heft/paper/plant/status"
+    assert keys.geometry() == "heft/paper/plant/geometry"
     assert keys.control() == "heft/paper/control"
     assert Keys("paper-1234_x").force(2) == "heft/paper-1234_x/robot/2/force"
 

@@ -1,4 +1,4 @@
-"""A halted team begins again once every robot is back: the barrier's generations, and agents
+"""A halted team begins again once every robot is back: the barrier's rejoins, and agents
 that drop what they knew and estimate the load anew from Step 1 (agent/algorithm/coordination.py,
 agent/algorithm/agent.py)."""
 
@@ -11,7 +11,6 @@ import pytest
 from agent.algorithm.coordination import PhaseBarrier
 from agent.platform.protocol import Barrier, Phase, Share, decode, encode
 from agent.platform.transport import InMemoryTransport
-from dashboard.geometry import LoadGeometry
 from dashboard.state import TeamState
 from simulator.inprocess import make_agents
 from simulator.plant import Plant
@@ -38,8 +37,8 @@ def _share(i: int, tick: int, b: PhaseBarrier) -> Share:
 
 def _line(n: int, ticks: int, back: dict[int, int], halted_from: int = 0):
     """``n`` barriers on a line, all halted from ``halted_from``; robot ``i`` has every
-    neighbour back from tick ``back[i]``. Returns the barriers and the tick each began the
-    next generation."""
+    neighbour back from tick ``back[i]``. Returns the barriers and the tick each began again
+    (one more rejoin)."""
     barriers = {i: PhaseBarrier(i, n, 2) for i in range(1, n + 1)}
     heard: dict[int, list[Share]] = {i: [] for i in barriers}
     began: dict[int, int] = {}
@@ -72,23 +71,23 @@ def test_a_halted_team_waits_for_its_last_robot() -> None:
     assert all(b.phase == Phase.HALTED and b.rejoins == 0 for b in barriers.values())
 
 
-def test_a_later_generation_is_caught_up_with_and_an_earlier_one_is_ignored() -> None:
+def test_more_rejoins_are_caught_up_with_and_fewer_are_ignored() -> None:
     b = PhaseBarrier(1, 2, 0)
     b.phase = Phase.HALTED
     b.step(10, False, [Barrier(phase=Phase.EXCITE, rejoins=2)])
     assert (b.phase, b.rejoins) == (Phase.EXCITE, 2)  # it missed the agreed tick
     b.step(11, True, [Barrier(phase=Phase.DONE, rejoins=1)])
     assert (b.phase, b.rejoins) == (Phase.EXCITE, 2)
-    assert b.ready == 0b01  # its own readiness only: the old generation's bits are not merged
+    assert b.ready == 0b01  # its own readiness only: bits of fewer rejoins are not merged
 
 
 def test_a_new_process_catches_up_with_a_halted_team() -> None:
-    fresh = PhaseBarrier(3, 4, 2)  # a robot's agent restarted: generation 0, excite
+    fresh = PhaseBarrier(3, 4, 2)  # a robot's agent restarted: no rejoin, excite
     fresh.step(0, False, [Barrier(phase=Phase.HALTED, rejoins=3)])
     assert (fresh.phase, fresh.rejoins) == (Phase.HALTED, 3)
 
 
-def test_the_generation_crosses_the_wire_and_is_domain_checked() -> None:
+def test_the_rejoins_cross_the_wire_and_are_domain_checked() -> None:
     share = Share(1, 5, (0.0, 0.0), 1, barrier=Barrier(rejoins=7))
     assert decode(Share, encode(share)).barrier.rejoins == 7
     with pytest.raises(ValueError, match="share.barrier.rejoins"):
@@ -150,7 +149,7 @@ def test_agents_halted_mid_run_begin_again_and_estimate_the_load_as_well() -> No
         c = truth.contact_to_com[a.robot - 1]
         assert abs(est.contact_to_com[0] - c[0]) < 2e-3 and abs(est.contact_to_com[1] - c[1]) < 2e-3
     # The dashboard's table says the team began again.
-    state = TeamState("rejoin", LoadGeometry.from_scenario(scenario))
+    state = TeamState("rejoin", scenario.load_geometry())
     state.ingest(truth, truth.time_s)
     for a in agents:
         state.ingest(a.estimates(), truth.time_s)
@@ -168,7 +167,7 @@ def _stepped(robot: int, ticks: int):
     return agent, Measurement
 
 
-def test_an_agent_that_missed_the_agreed_tick_begins_the_generation_where_it_is() -> None:
+def test_an_agent_that_missed_the_agreed_tick_begins_again_where_it_is() -> None:
     agent, Measurement = _stepped(2, 50)
     agent.halt()
     agent.step(Measurement(2, 50, 0.5, (0.0, 0.0), (0.0, 0.0)), [])
@@ -180,7 +179,7 @@ def test_an_agent_that_missed_the_agreed_tick_begins_the_generation_where_it_is(
     assert command.force != (0.0, 0.0)  # its own kick, from its own tick 0
 
 
-def test_an_agent_caught_up_past_step_1_halts_that_generation() -> None:
+def test_an_agent_caught_up_past_step_1_halts_after_that_rejoin() -> None:
     agent, Measurement = _stepped(2, 50)
     late = Share(1, 50, (0.0, 0.0), 1, barrier=Barrier(phase=Phase.INERTIA, rejoins=1))
     command, share = agent.step(Measurement(2, 51, 0.51, (0.0, 0.0), (0.0, 0.0)), [late])
@@ -199,7 +198,7 @@ class _Session:
         return self.fifos[key]
 
 
-def test_the_collector_follows_the_generations_of_a_team_that_begins_again() -> None:
+def test_the_collector_follows_the_rejoins_of_a_team_that_begins_again() -> None:
     from agent.platform.protocol import Estimates, Keys, Status
     from simulator.launcher import Collector
 
@@ -217,7 +216,7 @@ def test_the_collector_follows_the_generations_of_a_team_that_begins_again() -> 
     assert collector.halted and collector.lost == {2}
     say(Estimates(1, 650, Phase.EXCITE, phase_since=651, rejoins=1))
     assert not collector.halted and collector.lost == set() and collector.rejoined == 1
-    say(Status(2, 660, Phase.HALTED))  # of the old generation: late, ignored
+    say(Status(2, 660, Phase.HALTED))  # from before the rejoin: late, ignored
     assert not collector.halted
     say(Estimates(2, 900, Phase.EXCITE, phase_since=901, rejoins=2))  # its halt unheard
     assert collector.rejoins == [{"halted": 400, "began": 651}, {"halted": None, "began": 901}]

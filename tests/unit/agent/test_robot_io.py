@@ -14,7 +14,16 @@ import pytest
 from agent.node import AgentNode, AgentNodeConfig
 from agent.platform.faults import FaultSettings, FaultyTransport
 from agent.platform.process import RejectLog
-from agent.platform.protocol import Command, Control, Estimates, Measurement, Phase, Truth
+from agent.platform.protocol import (
+    Command,
+    Control,
+    Estimates,
+    LoadGeometry,
+    Measurement,
+    Phase,
+    PlantStatus,
+    Truth,
+)
 from agent.platform.robot_io import InMemoryRobots, Liveliness
 from agent.platform.statistics import percentile
 from agent.platform.transport import InMemoryTransport
@@ -70,6 +79,21 @@ def test_wake_ends_a_waiting_poll_at_once() -> None:
     started = time.perf_counter()
     assert port.poll(5.0) == []
     assert time.perf_counter() - started < 2.0
+
+
+def test_the_plant_tells_displays_the_loads_geometry_with_its_statuses() -> None:
+    """The load's outline and graph, which no other message carries, go out as the plant
+    comes up and again with each status (a display that joins late gets them)."""
+    scenario = load_scenario(PAPER)
+    reports: list = []
+    hub = InMemoryRobots(
+        {i: scenario.neighbours(i) for i in (1, 2, 3, 4)}, _rejects(), reports.append
+    )
+    stop = threading.Event()
+    stop.set()  # stopped before its agents came: it comes up, says so and leaves
+    assert PlantNode(scenario, hub.robots_port(), "lockstep", stop).run() == 0
+    assert [type(m) for m in reports] == [LoadGeometry, LoadGeometry, PlantStatus]
+    assert reports[0] == reports[1] == scenario.load_geometry()
 
 
 def _run_nodes(scenario: Scenario) -> tuple[dict[int, Estimates], Truth, list]:

@@ -338,6 +338,7 @@ def test_the_grants_follow_the_graph() -> None:
     assert grants["operator"].put == (keys.control(),)
     assert grants["dashboard"].put == () and grants["dashboard"].subscribe == ("heft/paper/**",)
     assert keys.control() not in grants["plant"].put
+    assert {keys.truth(), keys.geometry(), keys.plant_status()} <= set(grants["plant"].put)
     acl = access_control("paper", 4, LINE)
     ids = [rule["id"] for rule in acl["rules"]]
     assert len(ids) == len(set(ids))

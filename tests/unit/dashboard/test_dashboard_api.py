@@ -15,7 +15,6 @@ from starlette.websockets import WebSocketDisconnect
 from agent.platform.dispatch import main
 from agent.platform.protocol import Estimates, Phase
 from dashboard.app import AppSettings, create_app
-from dashboard.geometry import LoadGeometry
 from dashboard.hub import Hub
 from tests.helpers.paths import PAPER
 
@@ -30,9 +29,11 @@ def paper_run():
 
 
 def fed_hub(paper_run, upto: int | None = None) -> Hub:
-    """A hub that has heard the run (up to its ``upto``-th recorded instant)."""
+    """A hub that has heard the run (up to its ``upto``-th recorded instant), after the
+    plant's load geometry."""
     scenario, outcome = paper_run
-    hub = Hub("paper", LoadGeometry.from_scenario(scenario))
+    hub = Hub("paper")
+    hub.ingest_batch([("", scenario.load_geometry(), 0.0, 0)])
     samples = [*outcome.history, outcome.final][:upto]
     for sample in samples:
         batch = [("", sample.truth, sample.time_s, 0)]
@@ -168,7 +169,7 @@ def heft(*argv: str) -> tuple[int, str]:
         (("--team", "t", "--speed", "2"), "--speed and --paused need --replay FILE"),
         (("--replay", "x.mcap", "--speed", "0"), "--speed: expected"),
         (("--team", "t", "--connect", "nowhere"), "--connect: expected an explicit endpoint"),
-        (("--team", "t", "--scenario", "/nonexistent.toml"), "--scenario:"),
+        (("--team", "t", "--scenario", "paper.toml"), "--scenario: no longer needed: the plant"),
     ],
 )
 def test_bad_input_is_one_error_line_and_status_2(argv, message, monkeypatch) -> None:
@@ -178,6 +179,16 @@ def test_bad_input_is_one_error_line_and_status_2(argv, message, monkeypatch) ->
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("heft: error: "), err
     assert message in lines[0]
+
+
+def test_heft_record_refuses_a_scenario_and_says_where_the_outline_comes_from(tmp_path) -> None:
+    out = tmp_path / "run.mcap"
+    code, err = heft("record", "--team", "t", "-o", str(out), "--scenario", "paper.toml")
+    assert code == 2 and not out.exists()
+    assert err == (
+        "heft: error: --scenario: no longer needed: the plant (heft sim, heft run) publishes"
+        " the load's outline and the graph, and a recording keeps them\n"
+    )
 
 
 def test_the_estimates_json_is_finite(paper_run) -> None:

@@ -96,7 +96,7 @@ def test_bench_dashboard_without_a_browser_says_what_is_missing(monkeypatch, cap
         raise AssertionError("no benchmark without its browser")
 
     monkeypatch.setattr(streaming, "run", run)
-    monkeypatch.setattr(bench_cli, "CHROMIUM", "/nonexistent/chromium")
+    monkeypatch.setattr(streaming, "CHROMIUM", "/nonexistent/chromium")
     assert main(["bench", "dashboard"]) == 2
     out, err = capsys.readouterr()
     assert out == ""

@@ -12,7 +12,6 @@ import pytest
 from mcap.reader import make_reader
 
 from agent.platform.protocol import Command, Keys
-from dashboard.geometry import LoadGeometry
 from dashboard.recorder import Recorder
 from dashboard.replay import Recording, RecordingError, Replayer
 from dashboard.state import TeamState
@@ -29,10 +28,12 @@ def paper_run():
 
 
 def record_run(path: Path, scenario, outcome, team: str = "paper") -> None:
-    """The run's recorded instants as a recording, 10 ms of simulated time apart."""
+    """The run's recorded instants as a recording, 10 ms of simulated time apart, after the
+    load's geometry (as the plant publishes it when it comes up)."""
     keys = Keys(team)
     start = 1_700_000_000_000_000_000
-    with Recorder(path, team, LoadGeometry.from_scenario(scenario)) as recorder:
+    with Recorder(path, team) as recorder:
+        recorder.write(keys.geometry(), scenario.load_geometry(), start)
         for sample in [*outcome.history, outcome.final]:
             stamp = start + round(sample.truth.time_s * 1e9)
             recorder.write(keys.truth(), sample.truth, stamp)
@@ -52,22 +53,24 @@ def test_a_replayed_recording_gives_the_runs_final_table(tmp_path: Path, paper_r
         assert summary is not None and summary.statistics.message_count > 0
         schemas = {schema.name: schema.encoding for schema in summary.schemas.values()}
         assert schemas == {
+            "heft.LoadGeometry": "jsonschema",
             "heft.Truth": "jsonschema",
             "heft.Estimates": "jsonschema",
             "heft.Command": "jsonschema",
         }
         assert {c.message_encoding for c in summary.channels.values()} == {"json"}
-    direct = TeamState("paper", LoadGeometry.from_scenario(scenario))
+    direct = TeamState("paper", scenario.load_geometry())
     for sample in [*outcome.history, outcome.final]:
         direct.ingest(sample.truth, 0.0)
         for est in sample.estimates.values():
             direct.ingest(est, 0.0)
     recording = Recording(path)
-    assert recording.header() == ("paper", LoadGeometry.from_scenario(scenario))
-    replayed = TeamState("paper", recording.geometry)
+    assert recording.header() == "paper"
+    replayed = TeamState("paper")
     replayer = Replayer(recording, lambda r, t: replayed.ingest(r.message, t), speed=0).start()
     assert replayer.finished.wait(30)
     assert recording.cut is None and not recording.rejected
+    assert replayed.geometry == scenario.load_geometry()  # the outline from the recording
     assert replayed.final == direct.final is not None
     assert replayed.final["tick"] == outcome.final.truth.tick
     assert replayed.all_series() == direct.all_series()

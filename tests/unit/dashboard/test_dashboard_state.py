@@ -22,6 +22,7 @@ from agent.platform.protocol import (
     DecodeError,
     Estimates,
     Keys,
+    LoadGeometry,
     Measurement,
     Phase,
     PlantStatus,
@@ -32,7 +33,6 @@ from agent.platform.protocol import (
 )
 from agent.platform.team import ConsensusState
 from dashboard import channels
-from dashboard.geometry import GeometryError, LoadGeometry
 from dashboard.state import KEEP_TICKS, MAX_SEGMENTS, TeamState
 from tests.helpers.paths import PAPER
 
@@ -63,7 +63,7 @@ def test_the_charts_converge_to_the_truth_and_the_final_table_is_the_runs(paper_
     from simulator.results import robot_errors
 
     scenario, outcome = paper_run
-    state = TeamState("paper", LoadGeometry.from_scenario(scenario))
+    state = TeamState("paper", scenario.load_geometry())
     feed(state, outcome)
     series = state.all_series()
     for i in range(1, 5):
@@ -105,7 +105,7 @@ def test_the_charts_converge_to_the_truth_and_the_final_table_is_the_runs(paper_
 
 def test_the_pages_scene_is_the_scene_less_what_the_page_does_not_draw(paper_run) -> None:
     scenario, outcome = paper_run
-    state = TeamState("paper", LoadGeometry.from_scenario(scenario))
+    state = TeamState("paper", scenario.load_geometry())
     feed(state, outcome)
     final = copy.deepcopy(state.final)
     scene, page = state.scene(200.0), state.page_scene(200.0)
@@ -135,7 +135,7 @@ def test_a_lost_message_of_the_final_instant_moves_it_to_the_next_complete_one(p
     instant itself if its messages arrive late."""
     scenario, outcome = paper_run
     final = outcome.final
-    state = TeamState("paper", LoadGeometry.from_scenario(scenario))
+    state = TeamState("paper", scenario.load_geometry())
     for sample in outcome.history:
         if sample.truth.tick < final.truth.tick:
             state.ingest(sample.truth, sample.time_s)
@@ -208,7 +208,7 @@ def test_memory_is_bounded_whatever_the_length_of_the_run() -> None:
 
 
 def test_messages_outside_the_team_or_window_are_counted_and_dropped() -> None:
-    geometry = LoadGeometry("t", 4, ((0, 0), (1, 0), (0, 1)), ((1, 2), (2, 3), (3, 4)), 0.01)
+    geometry = LoadGeometry(4, ((0, 0), (1, 0), (0, 1)), ((1, 2), (2, 3), (3, 4)), 0.01)
     state = TeamState("t", geometry)
     assert state.ingest(Status(2, 10, Phase.EXCITE), now=0.0)
     assert not state.ingest(Status(5, 10, Phase.EXCITE), now=0.0)  # robot 5 of 4
@@ -250,7 +250,7 @@ def test_alarms_lost_robot_halt_bridge_watchdog_and_silence() -> None:
 
 
 def test_link_health_from_the_shares_age_and_rate() -> None:
-    geometry = LoadGeometry("t", 3, ((0, 0), (1, 0), (0, 1)), ((1, 2), (2, 3)), 0.01)
+    geometry = LoadGeometry(3, ((0, 0), (1, 0), (0, 1)), ((1, 2), (2, 3)), 0.01)
     state = TeamState("t", geometry)
     for k in range(100):  # robots 1 and 2 at 100 Hz for a second, robot 3 silent since 0.2 s
         state.ingest(Share(1, k, (0, 0), 1), k * 0.01)
@@ -299,6 +299,7 @@ EXAMPLES = [
     Control("stop"),
     PlantStatus(7, 0.07, "realtime", 1, 2, 0, 0, 0, (3,), 1.5, 2.5, 1.6, 10),
     BridgeStatus(2, 7, watchdog=True, frames_in=5),
+    LoadGeometry(2, ((-1.0, -1.0), (1.0, -1.0), (0.0, 1.0)), ((1, 2),), 0.01, 300),
 ]
 
 
@@ -332,12 +333,21 @@ def test_a_message_on_another_robots_key_or_out_of_its_domain_is_refused() -> No
         channels.from_record(Command, channels.record_bytes(bad))
 
 
-def test_a_load_geometry_survives_metadata_and_bad_metadata_is_refused(paper_run) -> None:
-    scenario, _ = paper_run
-    geometry = LoadGeometry.from_scenario(scenario)
-    assert LoadGeometry.from_metadata(geometry.to_metadata()) == geometry
-    com = (0.0, 0.0)
-    assert math.dist(geometry.world_outline(com, 0.0)[0], (-2.0, -1.0 + 0.138889)) < 1e-5
-    for change in ({"n": "99"}, {"outline": "[[0, 0]]"}, {"edges": "[[1, 9]]"}, {"period_s": "0"}):
-        with pytest.raises(GeometryError):
-            LoadGeometry.from_metadata({**geometry.to_metadata(), **change})
+def test_the_load_geometry_is_heard_from_the_plant_as_any_message(paper_run) -> None:
+    scenario, outcome = paper_run
+    geometry = scenario.load_geometry()
+    assert math.dist(geometry.world_outline((0.0, 0.0), 0.0)[0], (-2.0, -1.0 + 0.138889)) < 1e-5
+    assert geometry.end_tick == scenario.end_tick and geometry.edges == ((1, 2), (2, 3), (3, 4))
+    state = TeamState("paper")  # as a display that joins a team knowing nothing of its load
+    state.ingest(outcome.history[0].truth, 0.0)
+    assert state.top_view()["outline"] is None
+    assert state.ingest(geometry, 0.5)
+    assert state.geometry == geometry and state.period_s == scenario.period_s
+    truth = outcome.history[0].truth
+    assert state.top_view()["outline"] == [
+        list(p) for p in geometry.world_outline(truth.com_position, truth.angle)
+    ]
+    three = dataclasses.replace(geometry, n=3, edges=((1, 2), (2, 3)))
+    assert not state.ingest(three, 1.0)  # the truth has four contacts: not this team's load
+    assert state.geometry == geometry
+    assert state.rejected == {("LoadGeometry", "not the team's load"): 1}

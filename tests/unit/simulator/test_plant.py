@@ -269,7 +269,7 @@ def test_measured_force_is_the_one_applied_last_period(paper: Scenario) -> None:
     assert meas[1].time_s == pytest.approx(paper.period_s)
     assert all(m.force == (0.0, 0.0) for i, m in enumerate(meas) if i != 1)
 
-    plant.reset_commands()
+    plant.command(2, (0.0, 0.0))
     assert plant.measure()[1].force == (1.0, -2.0)  # still the last period's force
     plant.advance()
     assert all(m.force == (0.0, 0.0) for m in plant.measure())
