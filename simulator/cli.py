@@ -45,6 +45,7 @@ from agent.platform.command_line import (
 from agent.platform.process import StopSignals
 from agent.platform.protocol import CLOCKS, Phase
 from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings
+from simulator.lockstep import INTERRUPTED
 from simulator.scenario import (
     PAPER_SCENARIO,
     Scenario,
@@ -100,7 +101,6 @@ def _progress_printer(started: float, stream: TextIO) -> Progress:
 
 
 # ------------------------------------------------------------------------------ heft run
-INTERRUPTED = "interrupted"
 EXIT_INTERRUPTED = 130
 """Ctrl-C, SIGTERM and SIGHUP alike (128 + SIGINT, as shells report an interrupted command)."""
 
@@ -138,8 +138,6 @@ def cmd_run(args: argparse.Namespace) -> int:
             reason, detail, rejections = failed.reason, failed.detail, failed.rejections
         if reason == INTERRUPTED:
             detail = f"stopped by {stop.received.name if stop.received else 'KeyboardInterrupt'}"
-        elif reason and not detail:
-            detail = _detail(reason)
         if outcome is not None:
             outcome.detail = detail
             document = results_dict(outcome)
@@ -220,13 +218,6 @@ def _say_verdict(reason: str, detail: str, out: Path | None, recorded: bool) -> 
         return EXIT_INTERRUPTED
     print(f"{PROG}: not converged: {reason}: {detail}", file=sys.stderr)
     return 1
-
-
-def _detail(reason: str) -> str:
-    """A sentence for a reason that came without one (the in-process run's)."""
-    if reason.startswith("out of simulated time"):
-        return "the team was not done within the scenario's run.max_time_s"
-    return reason
 
 
 class _NothingRecorded(Exception):

@@ -46,7 +46,6 @@ from typing import TYPE_CHECKING, Protocol
 from agent.platform.evaluation import InPhase, final_instant
 from agent.platform.geometry import Vec2
 from agent.platform.protocol import Measurement, Phase, Truth
-from simulator.plant import Plant
 
 if TYPE_CHECKING:
     from simulator.scenario import Scenario
@@ -76,6 +75,8 @@ class PlantTicks:
     stands for what carries the values between the robots and their agents."""
 
     def __init__(self, scenario: Scenario, link: Link | None = None):
+        from simulator.plant import Plant  # pymunk: not for the commands' parsers
+
         self.plant = Plant(scenario)
         self.link = link
 
