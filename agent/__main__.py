@@ -1,5 +1,5 @@
-"""``python -m agent``: the ``heft`` command (see :mod:`agent.platform.dispatch`)."""
+"""``python -m agent``: the ``heft`` command (see :mod:`agent.platform.heft`)."""
 
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 
 raise SystemExit(main())

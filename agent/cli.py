@@ -9,7 +9,7 @@ import dataclasses
 import logging
 from pathlib import Path
 
-from agent.platform.command_line import (
+from agent.platform.cli_helpers import (
     HelpFormatter,
     UsageError,
     add_zenoh_options,

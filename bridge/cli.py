@@ -11,7 +11,7 @@ import argparse
 import dataclasses
 import sys
 
-from agent.platform.command_line import (
+from agent.platform.cli_helpers import (
     PROG,
     HelpFormatter,
     UsageError,
@@ -32,7 +32,7 @@ def register(commands: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------------------------- bridge
 def cmd_bridge(args: argparse.Namespace) -> int:
     """``heft bridge``: run one robot's AGV bridge until a signal."""
-    from agent.platform.dispatch import NETWORK_UNAVAILABLE
+    from agent.platform.heft import NETWORK_UNAVAILABLE
     from bridge.config import load_bridge_config
     from bridge.node import BusUnavailable, run_bridge
 

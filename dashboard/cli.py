@@ -22,7 +22,7 @@ import math
 import os
 from pathlib import Path
 
-from agent.platform.command_line import (
+from agent.platform.cli_helpers import (
     HelpFormatter,
     UsageError,
     add_zenoh_options,

@@ -31,7 +31,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
-from agent.platform.command_line import (
+from agent.platform.cli_helpers import (
     PROG,
     HelpFormatter,
     UsageError,
@@ -409,7 +409,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     import dataclasses
 
     from agent.platform.config import Bound, bounds
-    from agent.platform.dispatch import NETWORK_UNAVAILABLE
+    from agent.platform.heft import NETWORK_UNAVAILABLE
     from agent.platform.protocol import Keys
     from simulator.can_drivers import CanBusError
     from simulator.node import run_plant

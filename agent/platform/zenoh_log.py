@@ -30,8 +30,8 @@ foreign CA, plain TCP on its TLS port) at ``warn``, a certificate that matches n
 its access control at ``info``.
 
 Only a process whose own program is the ``heft`` command (:func:`enable`, by
-:func:`agent.platform.dispatch.main` run from the command line) and whose command asked for it
-(:func:`request`, by :func:`agent.platform.command_line.setup_logging`) routes Zenoh's log,
+:func:`agent.platform.heft.main` run from the command line) and whose command asked for it
+(:func:`request`, by :func:`agent.platform.cli_helpers.setup_logging`) routes Zenoh's log,
 from its first session on (:func:`agent.platform.zenoh_session.open_session` calls
 :func:`start`): the standard output of a process that calls commands or opens sessions as a
 library (a test's) is left alone, and so is that of a command that never opens Zenoh. Rust's

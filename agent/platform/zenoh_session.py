@@ -69,7 +69,7 @@ class ZenohSettings:
     """A Zenoh JSON5 config file to start from (TLS, access control, ...); the settings above
     are applied on top of it, so its mode, scouting and lease are never used. Its endpoints
     are, where it gives them, on the command line (:func:`file_endpoints`,
-    :func:`agent.platform.command_line.zenoh_settings`): ``--connect`` and ``--listen``
+    :func:`agent.platform.cli_helpers.zenoh_settings`): ``--connect`` and ``--listen``
     replace them, and they replace ``connect`` and ``listen``."""
     root_ca: str | None = None
     """Mutual TLS: the team's CA certificate (PEM), which every certificate shown to this
@@ -131,7 +131,7 @@ class ZenohSettings:
         Not part of :meth:`validate`: on robots the key is root's alone, and the service
         manager hands it to the process (systemd's ``LoadCredential``) at another path,
         given on the command line (``--tls-private-key``); the file's path is checked only
-        once the command line has had its say (:func:`agent.platform.command_line.zenoh_settings`,
+        once the command line has had its say (:func:`agent.platform.cli_helpers.zenoh_settings`,
         :func:`open_session`)."""
         if self.private_key is not None:
             self.check_config_file(self.private_key, where)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from agent.platform.command_line import PROG, HelpFormatter, UsageError
+from agent.platform.cli_helpers import PROG, HelpFormatter, UsageError
 
 
 def register(benchmarks: argparse._SubParsersAction) -> None:

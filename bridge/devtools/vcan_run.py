@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from contextlib import suppress
 from pathlib import Path
 
-from agent.platform.command_line import PROG, UsageError
+from agent.platform.cli_helpers import PROG, UsageError
 from agent.platform.process import STOP_SIGNALS, StopSignals
 from bridge.devtools.vcan import (
     ENABLE_HELP,

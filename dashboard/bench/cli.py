@@ -15,7 +15,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from agent.platform.command_line import HelpFormatter, UsageError
+from agent.platform.cli_helpers import HelpFormatter, UsageError
 
 
 def register(benchmarks: argparse._SubParsersAction) -> None:

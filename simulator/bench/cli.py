@@ -28,7 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from agent.platform.command_line import PROG, HelpFormatter, UsageError, check_writable
+from agent.platform.cli_helpers import PROG, HelpFormatter, UsageError, check_writable
 from agent.platform.config import Bound
 from agent.platform.goals import conclude
 from simulator.cli import load_scenario_argument

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from agent.platform.config import toml_value
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from tests.helpers.paths import PAPER
 
 

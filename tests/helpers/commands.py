@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.dispatch import BENCH_GROUP, GROUP
+from agent.platform.heft import BENCH_GROUP, GROUP
 
 
 def registered(group: str) -> set[str]:
@@ -28,7 +28,7 @@ def registered(group: str) -> set[str]:
 
 
 def registered_commands() -> set[str]:
-    """Every ``heft`` command: the packages' and ``heft bench`` (the dispatcher's own)."""
+    """Every ``heft`` command: the packages' and ``heft bench`` (the heft program's own)."""
     return registered(GROUP) | {"bench"}
 
 

@@ -13,7 +13,7 @@ import socket
 import pytest
 
 from agent.platform.children import free_port
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from agent.platform.zenoh_session import SessionError, ZenohSettings, open_session
 from tests.helpers.bad_input import refused, robot_file
 from tests.helpers.paths import PAPER

@@ -1,9 +1,9 @@
 """``heft`` as a user runs it, a process of its own: ``python -m agent`` and the installed
-``heft`` script are the dispatcher, and bad input (a bad option, a value out of its range, a
-bridge config without a channel, a CAN bus that cannot be opened) ends it at once with its exit
-status and one ``heft: error:`` line, never a traceback. The same refusals in one process are in
-tests/unit (test_cli.py, test_input_bounds.py, test_nodes_cli.py, test_can_drivers.py,
-test_noise_bench.py)."""
+``heft`` script run the heft program (:mod:`agent.platform.heft`), and bad input (a bad
+option, a value out of its range, a bridge config without a channel, a CAN bus that cannot be
+opened) ends it at once with its exit status and one ``heft: error:`` line, never a traceback.
+The same refusals in one process are in tests/unit (test_cli.py, test_input_bounds.py,
+test_nodes_cli.py, test_can_drivers.py, test_noise_bench.py)."""
 
 from __future__ import annotations
 

@@ -38,6 +38,6 @@ def test_the_protocol_and_the_zenoh_session_load_nothing_heavy() -> None:
 
 def test_building_the_heft_parser_loads_nothing_heavy() -> None:
     """``heft agent`` on a robot does not pay for the simulator's libraries."""
-    loaded = modules_loaded_by("from agent.platform.dispatch import build_parser\nbuild_parser()")
+    loaded = modules_loaded_by("from agent.platform.heft import build_parser\nbuild_parser()")
     assert "simulator.cli" in loaded and "agent.cli" in loaded
     assert [name for name in loaded if name.split(".")[0] in HEAVY] == []

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from simulator import launcher
 from simulator.scenario import load_scenario
 from tests.helpers.accuracy import worst_errors

@@ -1,6 +1,6 @@
 """Zenoh's own log in the process's log, the endpoints of a Zenoh config file, and what a
 session says is in force (agent/platform/zenoh_log.py, agent/platform/zenoh_session.py,
-agent/platform/command_line.py).
+agent/platform/cli_helpers.py).
 
 The router tests run ``heft router`` as a process, on ``tls/127.0.0.1:PORT`` with the config
 ``heft deploy router-config`` makes, and read its log (standard error) as an operator's journal
@@ -27,7 +27,7 @@ import pytest
 
 from agent.platform import zenoh_log
 from agent.platform.children import free_port
-from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_settings
+from agent.platform.cli_helpers import UsageError, add_zenoh_options, zenoh_settings
 from agent.platform.zenoh_session import (
     DEFAULT_ROUTER,
     SessionError,
@@ -136,7 +136,7 @@ def test_a_library_caller_routes_nothing(capsys) -> None:
     """A command called with its arguments (as tests do), not run as the process's program,
     and a session opened as a library leave Zenoh's log and standard output alone (here:
     pytest's own capture of descriptor 1)."""
-    from agent.platform.dispatch import main
+    from agent.platform.heft import main
 
     before = os.fstat(1)
     listen = f"tcp/127.0.0.1:{free_port()}"
@@ -161,7 +161,7 @@ ZENOH_COMMANDS = {
 
 @pytest.mark.parametrize("command", ZENOH_COMMANDS)
 def test_every_process_command_takes_the_zenoh_log_level(command: str) -> None:
-    from agent.platform.dispatch import build_parser
+    from agent.platform.heft import build_parser
 
     parser = build_parser()
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))

@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from agent.platform.dispatch import build_parser
+from agent.platform.heft import build_parser
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.dispatch import BENCH_GROUP, GROUP, main
+from agent.platform.heft import BENCH_GROUP, GROUP, main
 from tests.helpers.commands import registered
 from tests.helpers.paths import ROOT
 
@@ -36,7 +36,7 @@ the project; security (certificates, access control) and the robot's algorithm o
 platform; the agent's process and commands on both; the AGV bridge and the dashboard beside
 each other on the agent; the simulator, which runs the others (plant, launcher, benchmarks,
 the run's recording and dashboard), on top. ``heft`` finds each package's commands and
-benchmarks through entry points (``agent.platform.dispatch``), not imports."""
+benchmarks through entry points (``agent.platform.heft``), not imports."""
 
 
 # ------------------------------------------------------------------------------ the tree
@@ -55,7 +55,7 @@ def test_the_distribution_ships_only_the_products_packages() -> None:
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     include = pyproject["tool"]["setuptools"]["packages"]["find"]["include"]
     assert {pattern.rstrip("*") for pattern in include} <= set(PRODUCT_PACKAGES), include
-    assert pyproject["project"]["scripts"] == {"heft": "agent.platform.dispatch:main"}
+    assert pyproject["project"]["scripts"] == {"heft": "agent.platform.heft:main"}
     declared = pyproject["project"]["entry-points"][GROUP]
     assert set(declared) <= set(PRODUCT_PACKAGES), declared
     for package, target in declared.items():
@@ -199,7 +199,7 @@ def test_upward_imports_are_found_wherever_they_are(tmp_path: Path) -> None:
 def test_every_import_goes_down_the_layers() -> None:
     graph = import_graph()
     assert "dashboard.cli" in graph and "simulator.baseline" in graph
-    assert "agent.platform.dispatch" in graph["simulator.cli"]  # a function-level import
+    assert "agent.platform.heft" in graph["simulator.cli"]  # a function-level import
     assert upward_imports(graph, LAYERS) == []
 
 
@@ -228,7 +228,7 @@ def test_imported_names_sees_every_import(tmp_path: Path) -> None:
 
 def test_no_import_cycle_between_the_products_modules() -> None:
     graph = import_graph()
-    assert "agent.platform.dispatch" in graph and "simulator.cli" in graph
+    assert "agent.platform.heft" in graph and "simulator.cli" in graph
     assert "simulator.inprocess" in graph["simulator.cli"]  # a function-level import
     cycle = find_cycle(graph)
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
@@ -246,7 +246,7 @@ def listed(help_text: str, title: str, metavar: str) -> list[str]:
 
 def test_heft_help_lists_every_registered_command_on_one_line(capsys, monkeypatch) -> None:
     monkeypatch.setenv("COLUMNS", "80")
-    commands = registered(GROUP) | {"bench"}  # heft bench: the dispatcher's own
+    commands = registered(GROUP) | {"bench"}  # heft bench: the heft program's own
     assert commands >= COMMANDS
     with pytest.raises(SystemExit) as exited:
         main(["--help"])

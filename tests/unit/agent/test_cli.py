@@ -1,6 +1,6 @@
 """The ``heft`` command line: ``heft run`` on the paper's scenario end to end (exit status,
-results JSON, plots), bad input, every subcommand's ``--help``, and the dispatcher
-(agent/platform/dispatch.py) that gathers the packages' commands."""
+results JSON, plots), bad input, every subcommand's ``--help``, and the heft program
+(agent/platform/heft.py) that gathers the packages' commands."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from agent.platform.dispatch import BENCH_GROUP, GROUP, build_parser, main
+from agent.platform.heft import BENCH_GROUP, GROUP, build_parser, main
 from tests.helpers.paths import PAPER
 
 PLOTS = ("relative_positions.png", "inertia_mass.png", "com_observer.png")

@@ -261,7 +261,7 @@ def test_agent_and_bridge_run_as_the_user_their_key_is_readable_by() -> None:
 def test_the_router_unit_listens_where_its_config_and_the_robots_say() -> None:
     argv = exec_argv(DEPLOY / "systemd" / "heft-router.service")
     config = router_json5()
-    # heft router listens on the file's endpoints (agent.platform.command_line.zenoh_settings)
+    # heft router listens on the file's endpoints (agent.platform.cli_helpers.zenoh_settings)
     assert option(argv, "--zenoh-config") == ["/etc/heft/router.json5"]
     assert option(argv, "--listen") == []
     assert file_endpoints(str(ROUTER_JSON5), "router") == {

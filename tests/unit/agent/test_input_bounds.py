@@ -23,7 +23,7 @@ from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentTuning
 from agent.node import AgentNodeConfig, load_agent_config
 from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from agent.platform.zenoh_session import ZenohSettings
 from bridge.config import CanSettings
 from simulator.scenario import (

@@ -29,10 +29,10 @@ from hypothesis import strategies as st
 
 from agent.algorithm.tuning import AgentTuning
 from agent.node import AgentNodeConfig, load_agent_config
-from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_settings
+from agent.platform.cli_helpers import UsageError, add_zenoh_options, zenoh_settings
 from agent.platform.config import ConfigError, from_table, toml_value
-from agent.platform.dispatch import main
 from agent.platform.faults import FaultSettings
+from agent.platform.heft import main
 from agent.platform.protocol import CLOCKS
 from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings, zenoh_config
 from bridge.config import CanSettings, can_table

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.command_line import UsageError, add_zenoh_options, zenoh_settings
+from agent.platform.cli_helpers import UsageError, add_zenoh_options, zenoh_settings
 from agent.platform.config import ConfigError
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from agent.platform.protocol import Keys
 from agent.platform.zenoh_session import ZenohSettings, describe, zenoh_config
 from agent.security.access_control import (

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.dispatch import main
 from agent.platform.goals import judge
+from agent.platform.heft import main
 from agent.platform.protocol import Command, Measurement
 from agent.platform.statistics import percentile
 from bridge.bench import can as benchmark

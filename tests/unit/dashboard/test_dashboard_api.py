@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from agent.platform.protocol import Estimates, Phase
 from dashboard.app import AppSettings, create_app
 from dashboard.hub import Hub

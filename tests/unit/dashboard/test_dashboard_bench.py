@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.dispatch import main
 from agent.platform.goals import judge
+from agent.platform.heft import main
 from dashboard.bench import cli as bench_cli
 from dashboard.bench import streaming
 from dashboard.bench.streaming import (

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from agent.platform.protocol import Keys
 from dashboard.recorder import Recorder
 from simulator.baseline import fit, read_recording

@@ -516,7 +516,7 @@ def test_an_event_queue_is_shared_with_the_other_side(rig) -> None:
     ],
 )
 def test_bad_can_options_are_one_line_and_status_2(args, words, capsys) -> None:
-    from agent.platform.dispatch import main
+    from agent.platform.heft import main
 
     code = main(args)
     out, err = capsys.readouterr()
@@ -528,7 +528,7 @@ def test_bad_can_options_are_one_line_and_status_2(args, words, capsys) -> None:
 def test_heft_run_can_in_one_process_is_the_quantised_reference(tmp_path, capsys) -> None:
     import json
 
-    from agent.platform.dispatch import main
+    from agent.platform.heft import main
 
     path = PAPER
     out = tmp_path / "results.json"

@@ -7,7 +7,7 @@ import dataclasses
 
 import pytest
 
-from agent.platform.dispatch import build_parser, main
+from agent.platform.heft import build_parser, main
 from simulator.bench import generated
 
 

@@ -7,8 +7,8 @@ import dataclasses
 
 import pytest
 
-from agent.platform.dispatch import main
 from agent.platform.goals import exit_status, judge
+from agent.platform.heft import main
 from simulator.bench import changes, noise
 from simulator.bench.noise import (
     GOALS,

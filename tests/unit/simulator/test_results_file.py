@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from agent.platform.command_line import UsageError, check_writable, write_text
-from agent.platform.dispatch import main
+from agent.platform.cli_helpers import UsageError, check_writable, write_text
+from agent.platform.heft import main
 from simulator import cli
 from simulator.results import (
     ERROR_KEYS,

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from agent.algorithm.tuning import AgentTuning
 from agent.platform.config import ConfigError
-from agent.platform.dispatch import main
+from agent.platform.heft import main
 from simulator.generate import GRAPH_KINDS, generate_scenario
 from simulator.scenario import (
     Scenario,

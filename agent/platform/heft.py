@@ -9,8 +9,8 @@ A package adds its subcommands by declaring an entry point of the group :data:`G
 The entry point names a function ``register(commands)`` that adds the package's subcommands
 to ``commands`` (the ``argparse`` subparsers of ``heft``), each with
 ``formatter_class=HelpFormatter`` and ``set_defaults(handler=...)``
-(:mod:`agent.platform.command_line`). A handler takes the parsed arguments and returns the exit
-status; it raises :class:`~agent.platform.command_line.UsageError` for bad input, reported here as
+(:mod:`agent.platform.cli_helpers`). A handler takes the parsed arguments and returns the exit
+status; it raises :class:`~agent.platform.cli_helpers.UsageError` for bad input, reported here as
 one ``heft: error: ...`` line with exit status 2. ``register`` should import only what building
 the parser needs, so that ``heft agent`` on a robot does not load the simulator's libraries.
 
@@ -34,7 +34,7 @@ from collections.abc import Sequence
 from importlib import metadata
 
 from agent.platform import zenoh_log
-from agent.platform.command_line import PROG, HelpFormatter, UsageError
+from agent.platform.cli_helpers import PROG, HelpFormatter, UsageError
 from agent.platform.config import ConfigError
 from agent.platform.zenoh_session import SessionError
 

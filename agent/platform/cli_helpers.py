@@ -1,7 +1,7 @@
 """What every package's ``heft`` subcommands share: the error the user can fix, the help layout,
 output files, logging, and the Zenoh options of the process commands.
 
-A subcommand's handler raises :class:`UsageError` for bad input; :mod:`agent.platform.dispatch`
+A subcommand's handler raises :class:`UsageError` for bad input; :mod:`agent.platform.heft`
 prints it as one ``heft: error: <message>`` line and exits with status 2.
 
 Every command that opens a Zenoh session (``heft agent``, ``heft sim``, ``heft router``, ...)
