@@ -245,18 +245,11 @@ def cmd_noise(args: argparse.Namespace) -> int:
         figures,
         format_noise_report,
         run_noise_bench,
+        say_seed,
         timed,
     )
 
-    def on_seed(result) -> None:
-        state = "done" if result.robust_done else "NOT done"
-        print(
-            f"{PROG}: seed {result.seed}: robust {state} at {result.robust_time_s:.2f} s simulated",
-            file=sys.stderr,
-            flush=True,
-        )
-
-    results, wall = timed(run_noise_bench, scenarios, settings, on_seed)
+    results, wall = timed(run_noise_bench, scenarios, settings, say_seed)
     print(format_noise_report(results, settings, label, wall))
     return conclude(GOALS, figures(results))
 

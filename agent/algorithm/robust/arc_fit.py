@@ -49,6 +49,7 @@ import math
 
 from agent.algorithm.estimation.estimator import Covariance, largest_std
 from agent.algorithm.robust.least_squares import LeastSquares, Solution
+from agent.algorithm.robust.uncertainty import packed
 from agent.platform.geometry import Vec2, angle_between
 
 DIRECTION_VARIANCE = 1.5
@@ -235,13 +236,20 @@ class ArcRelativePosition:
         return max(radial, r * math.sqrt(DIRECTION_VARIANCE * self.direction_var))
 
     @property
-    def _arc_std(self) -> float | None:
-        """The centre's standard deviation along its least certain axis (m)."""
+    def centre_covariance(self) -> Covariance | None:
+        """The covariance (m²) of :attr:`centre`: the fit's, scaled by ``N`` and
+        :data:`CORRELATION`."""
         fit = self._solution
         if fit is None:
             return None
         (a, b, _), (_, d, _), _ = fit.covariance(self._scale)
-        return largest_std(a, b, d)
+        return ((a, b), (b, d))
+
+    @property
+    def _arc_std(self) -> float | None:
+        """The centre's standard deviation along its least certain axis (m)."""
+        cov = self.centre_covariance
+        return None if cov is None else largest_std(*packed(cov))
 
     @property
     def distance_std(self) -> float | None:

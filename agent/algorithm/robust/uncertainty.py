@@ -13,6 +13,8 @@ this one's, ``σ_g``: ``ḡ`` and ``q / (w/n)`` then have about ``σ_g / √n`` 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 PUBLISHED_VARIANCE = {"relative": 0.79, "contact_to_com": 1.57, "moment": 1.52}
 """Factors on the variances the robust estimators publish for ``z_ij``, ``contact_to_com``
 and ``Ĵ`` (not on those they settle by): the drives' gains and the reversing push add errors
@@ -23,6 +25,22 @@ of the noise benchmark's setting (the paper's scenario at 1 cm/s with lagging dr
 gain error), seeds 20–59: 95 % of the errors fell within 1.96 published standard deviations
 (2.45 for the planar ones) with the variances scaled by these factors (the team's ``m̂``'s
 needed 0.82, and is published as it is). The benchmark's seeds, 0–19, were not used."""
+
+
+@dataclass(frozen=True)
+class FitShares:
+    """The shares of one robot's uncertainties that its fits' row counts give, which their
+    correlation times scale (:attr:`~agent.algorithm.robust.least_squares.RunFit.
+    correlation_time`): what their calibration reads besides the estimates (``None``: not
+    fitted yet)."""
+
+    moment: float | None = None
+    """kg m²: the inertia fit's own share of the published ``moment_std`` before its factor
+    in :data:`PUBLISHED_VARIANCE` (the fit's standard deviation, scaled as ``Ĵ`` is by
+    ``q / (w/n)``)."""
+    own_mass: tuple[float, float, float] | None = None
+    """``(m̂_i, σ, σ_fit)`` (kg): this robot's own mass (before the team's consensus on it), its
+    standard deviation, and the mass fit's own share of it (scaled as ``m̂_i`` is by ``ḡ``)."""
 
 
 def packed(cov) -> tuple[float, float, float]:
