@@ -83,12 +83,14 @@ GOALS = (
 GENERATED_PUSH_DAMPING = 2.0
 """N s/m: :attr:`NoiseSettings.push_damping` for the generated scenarios, whose loads (1 to
 50 kg, 3 to 8 robots) under one push force would otherwise swing by up to ``n f T/2m`` =
-16 m/s; with it, the COM's speed stays within about ``f / b`` = 1 m/s."""
+16 m/s; with it, the COM's speed stays within about ``f / b`` = 1 m/s (``heft bench noise
+--generated 20`` gives the largest speed over its runs, and how many kept to their floor)."""
 GENERATED_INERTIA_BRAKE_S = 0.5
 """s: :attr:`NoiseSettings.inertia_brake_s` for the generated scenarios: Step 4 brakes first
 for half of its 1 s flip, so that ω swings about the turn the load had; speeding up first, a
 compact light load (``J`` of 1.6 kg m² under 7 robots) turned at up to 2.75 rad/s, beyond its
-floor's 2 rad/s."""
+floor's 2 rad/s (``heft bench noise --generated 20`` gives the largest ``|ω|`` over its runs,
+and how many kept to their floor)."""
 SWEEP = (0.0, 0.001, 0.003, 0.01, 0.03)
 """σ_v (m/s) of the sweep; σ_f = 50 σ_v."""
 
@@ -104,7 +106,8 @@ class NoiseSettings:
     seeds: int = 20
     first_seed: int = 0
     """The seeds run are ``first_seed .. first_seed + seeds − 1`` (the published variances'
-    factors were measured on seeds 20–59, not on the benchmark's 0–19)."""
+    factors were measured on seeds 20–59, not on the benchmark's 0–19: ``heft bench calibrate
+    published-variance``)."""
     max_time_s: float = 60.0
     spin_speed: float = 1.0
     """m/s: Step 1's spin-up target, for both estimators (the scenarios' default is 0.5: a
