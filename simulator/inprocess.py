@@ -96,11 +96,13 @@ def run_inprocess(
     progress_every: int = 100,
     link: str = "memory",
     on_measure: Callable[[list[Measurement]], None] | None = None,
+    on_sample: Callable[[Sample, list[Agent]], None] | None = None,
 ) -> RunOutcome:
     """Run ``scenario`` to convergence (or its time limit) in this process; ``link`` is one
     of :data:`LINKS` (see the module docstring). ``on_measure`` (if given) sees every tick's
     measurements, robot 1 first, as the agents get them (the centralized baseline fits
-    them)."""
+    them); ``on_sample`` (if given) sees each recorded sample with the agents whose estimates
+    it holds, in the state they were then (the last call: the final sample)."""
     if link not in LINKS:
         raise ValueError(f"link must be one of {LINKS}, got {link!r}")
     quantiser = None
@@ -136,6 +138,8 @@ def run_inprocess(
             if pending is not None and all(a.instant == k - 1 for a in agents):
                 final = _sample(k - 1, scenario, pending, agents)
                 history.append(final)
+                if on_sample is not None:
+                    on_sample(final, agents)
                 if verdict is not None:
                     break
             team_phase = min(a.phase for a in agents)

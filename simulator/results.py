@@ -172,18 +172,25 @@ def _scalar_interval(estimate, std, truth: float) -> tuple[float | None, bool | 
     return half, abs(estimate - truth) <= half
 
 
+def distance2(error: Sequence[float], cov: Sequence[float]) -> float:
+    """``eᵀ C⁻¹ e``: the squared Mahalanobis distance of a planar ``error`` under the
+    covariance ``cov`` ``(xx, xy, yy)`` (0 for no error, infinite for an error outside a
+    singular ``C``'s range)."""
+    xx, xy, yy = cov
+    ex, ey = error
+    det = xx * yy - xy * xy
+    if det <= 0.0:
+        return 0.0 if ex == 0.0 and ey == 0.0 else math.inf
+    return (yy * ex * ex - 2.0 * xy * ex * ey + xx * ey * ey) / det
+
+
 def _planar_interval(estimate, cov, truth) -> tuple[float | None, bool | None]:
     """The 95 % ellipse's half-width along its longest axis, and whether ``truth`` is in it."""
     if estimate is None or cov is None:
         return None, None
-    xx, xy, yy = cov
-    det = xx * yy - xy * xy
-    half = math.sqrt(PLANAR_95) * largest_std(xx, xy, yy)
-    ex, ey = estimate[0] - truth[0], estimate[1] - truth[1]
-    if det <= 0.0:
-        return half, ex == 0.0 and ey == 0.0
-    distance2 = (yy * ex * ex - 2.0 * xy * ex * ey + xx * ey * ey) / det
-    return half, distance2 <= PLANAR_95
+    half = math.sqrt(PLANAR_95) * largest_std(*cov)
+    error = (estimate[0] - truth[0], estimate[1] - truth[1])
+    return half, distance2(error, cov) <= PLANAR_95
 
 
 def intervals(outcome: RunOutcome, robot: int) -> dict[str, Any] | None:

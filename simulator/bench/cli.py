@@ -8,12 +8,16 @@
     heft bench sweep [SCENARIO] [--seeds N] [--first-seed S] [--generated N] [--ideal-drives]
                      [--plot DIR]
     heft bench changes [SCENARIO] [--seeds N] [--first-seed S]
+    heft bench calibrate published-variance|direction-variance|correlation-time [--seeds N]
+                         [--first-seed S] [--ideal-drives]
+    heft bench calibrate arc-correlation [--seeds N]
 
 Each runs in this process (``zenoh``: as processes on 127.0.0.1) and prints its report on
 standard output, its progress on stderr. ``generated``, ``noise`` and ``changes`` check goals
 (their modules' ``GOALS``): each goal's figure and verdict are printed last, and the exit
 status is 0 when every one is met, 1 when one is not. ``accuracy``, ``zenoh`` and ``sweep``
-report figures and check none: 0 once they ran.
+report figures and check none: 0 once they ran; so does ``calibrate``
+(:mod:`simulator.bench.calibrate`), which registers its own parser.
 
 Building the parsers imports nothing heavy (no pymunk, numpy or matplotlib): the handlers
 import what they run.
@@ -31,6 +35,7 @@ from typing import TYPE_CHECKING
 from agent.platform.cli_helpers import PROG, HelpFormatter, UsageError, check_writable
 from agent.platform.config import Bound
 from agent.platform.goals import conclude
+from simulator.bench import calibrate
 from simulator.cli import load_scenario_argument
 from simulator.scenario import PAPER_SCENARIO
 
@@ -245,18 +250,11 @@ def cmd_noise(args: argparse.Namespace) -> int:
         figures,
         format_noise_report,
         run_noise_bench,
+        say_seed,
         timed,
     )
 
-    def on_seed(result) -> None:
-        state = "done" if result.robust_done else "NOT done"
-        print(
-            f"{PROG}: seed {result.seed}: robust {state} at {result.robust_time_s:.2f} s simulated",
-            file=sys.stderr,
-            flush=True,
-        )
-
-    results, wall = timed(run_noise_bench, scenarios, settings, on_seed)
+    results, wall = timed(run_noise_bench, scenarios, settings, say_seed)
     print(format_noise_report(results, settings, label, wall))
     return conclude(GOALS, figures(results))
 
@@ -408,5 +406,6 @@ PARSERS: tuple[Callable[[argparse._SubParsersAction], None], ...] = (
     _add_noise,
     _add_sweep,
     _add_changes,
+    calibrate.add_parser,
 )
 """Each adds one benchmark's parser to ``heft bench``, in the order its help lists them."""

@@ -18,7 +18,10 @@ baseline's, how many runs were done within :data:`DONE_WITHIN_S` simulated, and 
 truth fell inside the robust estimators' published 95 % intervals. Its goals (:data:`GOALS`,
 measured by :func:`figures`): each robust median within :data:`RATIO_GOAL` times the
 baseline's, the truth inside the intervals 90–99 % of the time, every robust run done within
-:data:`DONE_WITHIN_S` and on its floor.
+:data:`DONE_WITHIN_S` and on its floor. Each seed's result also keeps every robot's published
+estimates beside the truth (:class:`Interval`), from which ``heft bench calibrate``
+(:mod:`simulator.bench.calibrate`) computes the factors the published uncertainties are
+scaled by.
 
 A sweep (``heft bench sweep``, :func:`run_sweep`) repeats this over ``σ_v`` with
 ``σ_f = 50 σ_v`` and plots the medians against ``σ_v``; it checks no goal.
@@ -29,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import statistics
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -36,11 +40,13 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.algorithm.robust.uncertainty import FitShares
 from agent.algorithm.tuning import Estimators
-from agent.platform.evaluation import ERROR_KEYS, team_errors
+from agent.platform.cli_helpers import PROG
+from agent.platform.evaluation import ERROR_KEYS, team_errors, true_relative
 from agent.platform.goals import Goal, Sense
 from agent.platform.protocol import Estimates, Measurement, Phase
-from simulator.inprocess import RunOutcome, run_inprocess
+from simulator.inprocess import RunOutcome, Sample, run_inprocess
 from simulator.results import errors, floor_check, intervals
 from simulator.scenario import Actuators, Scenario
 
@@ -77,12 +83,14 @@ GOALS = (
 GENERATED_PUSH_DAMPING = 2.0
 """N s/m: :attr:`NoiseSettings.push_damping` for the generated scenarios, whose loads (1 to
 50 kg, 3 to 8 robots) under one push force would otherwise swing by up to ``n f T/2m`` =
-16 m/s; with it, the COM's speed stays within about ``f / b`` = 1 m/s."""
+16 m/s; with it, the COM's speed stays within about ``f / b`` = 1 m/s (``heft bench noise
+--generated 20`` gives the largest speed over its runs, and how many kept to their floor)."""
 GENERATED_INERTIA_BRAKE_S = 0.5
 """s: :attr:`NoiseSettings.inertia_brake_s` for the generated scenarios: Step 4 brakes first
 for half of its 1 s flip, so that ω swings about the turn the load had; speeding up first, a
 compact light load (``J`` of 1.6 kg m² under 7 robots) turned at up to 2.75 rad/s, beyond its
-floor's 2 rad/s."""
+floor's 2 rad/s (``heft bench noise --generated 20`` gives the largest ``|ω|`` over its runs,
+and how many kept to their floor)."""
 SWEEP = (0.0, 0.001, 0.003, 0.01, 0.03)
 """σ_v (m/s) of the sweep; σ_f = 50 σ_v."""
 
@@ -98,7 +106,8 @@ class NoiseSettings:
     seeds: int = 20
     first_seed: int = 0
     """The seeds run are ``first_seed .. first_seed + seeds − 1`` (the published variances'
-    factors were measured on seeds 20–59, not on the benchmark's 0–19)."""
+    factors were measured on seeds 20–59, not on the benchmark's 0–19: ``heft bench calibrate
+    published-variance``)."""
     max_time_s: float = 60.0
     spin_speed: float = 1.0
     """m/s: Step 1's spin-up target, for both estimators (the scenarios' default is 0.5: a
@@ -122,6 +131,34 @@ class NoiseSettings:
     scenario does without: its push is sized for its load, and the damping takes from the
     mass's signal (``heft bench noise``: m 0.76 % with it, 0.58 % without)."""
 
+    @property
+    def noise_text(self) -> str:
+        """The sensors' noise and the drives, as the reports give them."""
+        return (
+            f"sigma_v {self.velocity_noise:g} m/s, sigma_f {self.force_noise:g} N, drives:"
+            f" lag {self.time_constant_s:g} s, gain error {100 * self.gain_error_std:g} %"
+        )
+
+
+@dataclass(frozen=True)
+class Interval:
+    """One robot's estimate with its uncertainty at the robust run's final instant, beside
+    the truth then: a scalar as one component, a vector as two; ``covariance`` as the robot
+    published it, ``(σ²,)`` or ``(xx, xy, yy)``."""
+
+    robot: int
+    estimate: tuple[float, ...]
+    truth: tuple[float, ...]
+    covariance: tuple[float, ...]
+    fit_std: float | None = None
+    """For ``Ĵ`` and a robot's own ``m̂``: the share of the standard deviation that the fit's
+    rows give (:class:`~agent.algorithm.robust.uncertainty.FitShares`)."""
+
+    @property
+    def error(self) -> tuple[float, ...]:
+        """The estimate minus the truth."""
+        return tuple(e - t for e, t in zip(self.estimate, self.truth))
+
 
 @dataclass
 class SeedResult:
@@ -139,6 +176,9 @@ class SeedResult:
     floor: dict = field(default_factory=dict)
     """The robust run's excursion against the scenario's floor
     (:func:`~simulator.results.floor_check`)."""
+    intervals: dict[str, list[Interval]] = field(default_factory=dict)
+    """The robust run's published estimates (:func:`published`): ``mass``, ``moment``,
+    ``contact_to_com``, ``relative_positions`` (one per edge) and ``own_mass``."""
 
 
 def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Estimators):
@@ -215,13 +255,58 @@ def baseline_errors(
     return team_errors(fitted, truth, graph)
 
 
+def published(sample: Sample, shares: dict[int, FitShares]) -> dict[str, list[Interval]]:
+    """Every robot's estimates in ``sample`` that it published an uncertainty for, beside the
+    truth then (:class:`Interval`): ``mass`` (the team's), ``moment``, ``contact_to_com``, one
+    ``relative_positions`` per edge, and ``own_mass`` (the robot's own fit, not published),
+    with the shares of their fits (``shares``, per robot) for ``moment`` and ``own_mass``."""
+    truth = sample.truth
+    found: dict[str, list[Interval]] = {
+        key: [] for key in ("mass", "moment", "contact_to_com", "relative_positions", "own_mass")
+    }
+    for i, est in sorted(sample.estimates.items()):
+        share = shares.get(i, FitShares())
+        if est.mass is not None and est.mass_std is not None:
+            found["mass"].append(Interval(i, (est.mass,), (truth.mass,), (est.mass_std**2,)))
+        if est.moment is not None and est.moment_std is not None:
+            found["moment"].append(
+                Interval(i, (est.moment,), (truth.moment,), (est.moment_std**2,), share.moment)
+            )
+        if est.contact_to_com is not None and est.contact_to_com_cov is not None:
+            found["contact_to_com"].append(
+                Interval(
+                    i,
+                    tuple(est.contact_to_com),
+                    tuple(truth.contact_to_com[i - 1]),
+                    tuple(est.contact_to_com_cov),
+                )
+            )
+        for j, cov in sorted(est.relative_positions_cov.items()):
+            z = est.relative_positions.get(j)
+            if z is not None:
+                found["relative_positions"].append(
+                    Interval(i, tuple(z), true_relative(truth, i, j), tuple(cov))
+                )
+        if share.own_mass is not None:
+            mass, std, fit_std = share.own_mass
+            found["own_mass"].append(Interval(i, (mass,), (truth.mass,), (std * std,), fit_std))
+    return found
+
+
 def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResult:
     """The three estimators on seed ``seed`` of ``scenario`` (see the module docstring)."""
     measured: list[list[Measurement]] = []
+    final: dict[str, list[Interval]] = {}
+
+    def keep(sample: Sample, agents) -> None:
+        final.clear()
+        final.update(published(sample, {a.robot: a.pipeline.fit_shares() for a in agents}))
+
     robust = run_inprocess(
         noisy(scenario, settings, seed, Estimators.ROBUST),
         record_every=1000,
         on_measure=measured.append,
+        on_sample=keep,
     )
     paper = run_inprocess(noisy(scenario, settings, seed, Estimators.PAPER), record_every=1000)
     inside: dict[str, list[bool]] = {key: [] for _, key, _, _ in QUANTITIES}
@@ -248,6 +333,17 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
         paper_done=paper.converged,
         inside=inside,
         floor=floor_check(robust),
+        intervals=dict(final),
+    )
+
+
+def say_seed(result: SeedResult) -> None:
+    """One progress line on stderr per seed: the robust run done or not, and when."""
+    state = "done" if result.robust_done else "NOT done"
+    print(
+        f"{PROG}: seed {result.seed}: robust {state} at {result.robust_time_s:.2f} s simulated",
+        file=sys.stderr,
+        flush=True,
     )
 
 
@@ -333,9 +429,7 @@ def format_noise_report(
     n = len(results)
     seeds = f"{n} seeds" if not results else f"{n} seeds ({results[0].seed}-{results[-1].seed})"
     lines = [
-        f"heft bench noise: {label}, {seeds}, sigma_v {settings.velocity_noise:g} m/s,"
-        f" sigma_f {settings.force_noise:g} N, drives: lag {settings.time_constant_s:g} s,"
-        f" gain error {100 * settings.gain_error_std:g} % ({wall_s:.0f} s wall)",
+        f"heft bench noise: {label}, {seeds}, {settings.noise_text} ({wall_s:.0f} s wall)",
         "",
         f"{'median error':<18} {'robust':>9} {'paper':>9} {'baseline':>9}"
         f" {'robust/baseline':>16} {'95 % inside':>12}",

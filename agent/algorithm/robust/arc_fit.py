@@ -49,17 +49,30 @@ import math
 
 from agent.algorithm.estimation.estimator import Covariance, largest_std
 from agent.algorithm.robust.least_squares import LeastSquares, Solution
+from agent.algorithm.robust.uncertainty import packed
 from agent.platform.geometry import Vec2, angle_between
 
 DIRECTION_VARIANCE = 1.5
 """Factor on the direction filter's variance ``P`` when published: the filter takes the
-increments' and the measurements' noise as independent, and they share each sample's. Measured
-over 40 runs of the paper's scenario at 1 cm/s (seeds 0–39): 95 % of the robots' ``z_ij`` fell
-within the 95 % ellipse with ``P`` scaled by 1.4 to 1.5."""
+increments' and the measurements' noise as independent, and they share each sample's. Set
+over 40 runs of the paper's scenario at 1 cm/s (seeds 0–39), where 95 % of the robots' ``z_ij``
+fell within the 95 % ellipse with ``P`` scaled by 1.4 to 1.5.
+
+Measured again by ``heft bench calibrate direction-variance`` (the noise benchmark's runs of
+seeds 0–39; each edge's 95 % ellipse without ``PUBLISHED_VARIANCE``, the factor on ``r² P``
+alone). On 2026-11-27 it printed 1.19 for 95 % of the edges inside (1.27 for 95 % of the
+robots with all their edges inside; with 1.5, 97.5 % and 96.2 %); with ``--ideal-drives``,
+1.13 and 1.25."""
 CORRELATION = 2.5
-"""Factor on ``N σ̂² (AᵀA)⁻¹``. Measured on simulated arcs (‖z‖ = 1.5 m, ω = 0.3 ± 0.2 rad/s,
-100 Hz, σ from 1 mm/s to 3 cm/s, 40 seeds): the mean squared error of ``z_ij`` per axis is
-0.6 to 1.4 times the variance this gives, for 3 s to 20 s of arc."""
+"""Factor on ``N σ̂² (AᵀA)⁻¹``, the covariance of the centre and of the radius. Set on
+simulated arcs (‖z‖ = 1.5 m, ω = 0.3 ± 0.2 rad/s, 100 Hz, σ from 1 mm/s to 3 cm/s, 40 seeds,
+3 s to 20 s of arc), where the mean squared error of ``z_ij`` per axis was 0.6 to 1.4 times
+the variance this gives.
+
+Measured again by ``heft bench calibrate arc-correlation`` (those arcs, each read at 3, 5, 10
+and 20 s). On 2026-11-27 it printed 2.52 for 95 % of the centres inside their 95 % ellipse
+(94.7 % with 2.5) and 1.2 for 95 % of the radii within 1.96 standard deviations (99.8 % with
+2.5); the centre's mean squared error per axis was 0.27 to 0.97 times its variance."""
 
 
 class ArcRelativePosition:
@@ -235,13 +248,20 @@ class ArcRelativePosition:
         return max(radial, r * math.sqrt(DIRECTION_VARIANCE * self.direction_var))
 
     @property
-    def _arc_std(self) -> float | None:
-        """The centre's standard deviation along its least certain axis (m)."""
+    def centre_covariance(self) -> Covariance | None:
+        """The covariance (m²) of :attr:`centre`: the fit's, scaled by ``N`` and
+        :data:`CORRELATION`."""
         fit = self._solution
         if fit is None:
             return None
         (a, b, _), (_, d, _), _ = fit.covariance(self._scale)
-        return largest_std(a, b, d)
+        return ((a, b), (b, d))
+
+    @property
+    def _arc_std(self) -> float | None:
+        """The centre's standard deviation along its least certain axis (m)."""
+        cov = self.centre_covariance
+        return None if cov is None else largest_std(*packed(cov))
 
     @property
     def distance_std(self) -> float | None:

@@ -57,10 +57,16 @@ class InertiaFit(ReciprocalFit):
         self._solve()
 
     @property
+    def fit_std(self) -> float | None:
+        """The fit's own share of :attr:`std` (kg m²): the share that
+        :attr:`~agent.algorithm.robust.least_squares.RunFit.correlation_time` scales."""
+        return super().std
+
+    @property
     def std(self) -> float | None:
         """The standard deviation of :attr:`estimate` (kg m²): the fit's and the torque
         scale's (``Ĵ ∝ w``)."""
-        from_fit = super().std
+        from_fit = self.fit_std
         if from_fit is None:
             return None
         return math.hypot(from_fit, self.torque_scale_std * self.estimate)

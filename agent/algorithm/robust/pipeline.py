@@ -27,7 +27,7 @@ from agent.algorithm.robust.load_change import ProbeFit
 from agent.algorithm.robust.mass_fit import MassFit
 from agent.algorithm.robust.rotation import RotationConsensus, own_turn, turn_weight, wrapped
 from agent.algorithm.robust.team_mass import inputs, mass_input, team_mass
-from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, packed
+from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, FitShares, packed
 from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2, turned_covariance
 
@@ -270,6 +270,20 @@ class RobustPipeline(EstimationPipeline):
         return mass_std / mass, cov
 
     # ---------------------------------------------------------------- reporting
+    def fit_shares(self) -> FitShares:
+        """The shares of ``Ĵ``'s and of this robot's own ``m̂``'s uncertainties that their fits
+        give (:class:`~agent.algorithm.robust.uncertainty.FitShares`), now."""
+        inertia, mass_fit = self.inertia, self.mass_estimator
+        fit_std = None if inertia is None else inertia.fit_std
+        own, std = self._own_mass()
+        mass_std = None if mass_fit is None else mass_fit.std
+        return FitShares(
+            moment=None if fit_std is None else fit_std * self._torque_gain,
+            own_mass=None
+            if own is None or std is None or mass_std is None
+            else (own, std, mass_std * self.consensus["mean_gain"]),
+        )
+
     def consensus_state(self):
         """The consensus' states, with this robot's level of the load's rotation (sent modulo
         ``2π``) and its state of the turns' mean variance."""

@@ -13,6 +13,8 @@ this one's, ``σ_g``: ``ḡ`` and ``q / (w/n)`` then have about ``σ_g / √n`` 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 PUBLISHED_VARIANCE = {"relative": 0.79, "contact_to_com": 1.57, "moment": 1.52}
 """Factors on the variances the robust estimators publish for ``z_ij``, ``contact_to_com``
 and ``Ĵ`` (not on those they settle by): the drives' gains and the reversing push add errors
@@ -21,8 +23,31 @@ the ``z_ij`` take the team's turn for twice as uncertain as independent robots' 
 (:mod:`agent.algorithm.robust.rotation`), which errs on the safe side. Measured over 40 runs
 of the noise benchmark's setting (the paper's scenario at 1 cm/s with lagging drives of 2 %
 gain error), seeds 20–59: 95 % of the errors fell within 1.96 published standard deviations
-(2.45 for the planar ones) with the variances scaled by these factors (the team's ``m̂``'s
-needed 0.82, and is published as it is). The benchmark's seeds, 0–19, were not used."""
+(2.45 for the planar ones: the 95 % ellipse, each ``z_ij`` on its own) with the variances
+scaled by these factors (the team's ``m̂``'s needed 0.82, and is published as it is). The
+benchmark's seeds, 0–19, were not used.
+
+``heft bench calibrate published-variance`` (by default on seeds 20–59) prints each factor,
+the share inside with it, and the factor for 95 % inside. On 2026-11-27 it printed 0.784 for
+``relative``, 1.56 for ``contact_to_com``, 1.48 for ``moment`` and 0.818 for the team's ``m̂``
+(with these factors 95.0 % inside for each, 97.5 % for ``m̂``; 92.5 % of the robots with all
+their ``z_ij`` inside)."""
+
+
+@dataclass(frozen=True)
+class FitShares:
+    """The shares of one robot's uncertainties that its fits' row counts give, which their
+    correlation times scale (:attr:`~agent.algorithm.robust.least_squares.RunFit.
+    correlation_time`): what their calibration reads besides the estimates (``None``: not
+    fitted yet)."""
+
+    moment: float | None = None
+    """kg m²: the inertia fit's own share of the published ``moment_std`` before its factor
+    in :data:`PUBLISHED_VARIANCE` (the fit's standard deviation, scaled as ``Ĵ`` is by
+    ``q / (w/n)``)."""
+    own_mass: tuple[float, float, float] | None = None
+    """``(m̂_i, σ, σ_fit)`` (kg): this robot's own mass (before the team's consensus on it), its
+    standard deviation, and the mass fit's own share of it (scaled as ``m̂_i`` is by ``ḡ``)."""
 
 
 def packed(cov) -> tuple[float, float, float]:

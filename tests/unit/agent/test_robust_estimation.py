@@ -157,12 +157,14 @@ def test_inertia_fit_std_grows_with_the_angle_noise_and_the_torque_scale() -> No
         for angle, torque in _spin(12.0, 3.0, noise, 7):
             fit.update(angle, torque, DT)
         assert fit.estimate == pytest.approx(12.0, rel=0.05)
+        assert fit.fit_std == fit.std  # no torque scale: the fit's share is all of it
         stds.append(fit.std)
     assert stds[1] > 5 * stds[0]
     scaled = InertiaFit(torque_scale_std=0.01)
     for angle, torque in _spin(12.0, 3.0):
         scaled.update(angle, torque, DT)
     assert scaled.std == pytest.approx(0.01 * 12.0, rel=1e-3)  # Ĵ ∝ w: 1 % of w, 1 % of J
+    assert scaled.fit_std < 1e-3 * scaled.std  # noise-free: the torque scale's alone
 
 
 # ------------------------------------------------------------------------------ Step 5

@@ -10,6 +10,7 @@ import pytest
 from agent.platform.goals import exit_status, judge
 from agent.platform.heft import main
 from simulator.bench import changes, noise
+from simulator.bench.calibrate import published_variance
 from simulator.bench.noise import (
     GOALS,
     NoiseSettings,
@@ -118,6 +119,21 @@ def test_one_seed_against_the_centralized_fit() -> None:
     assert result.robust_done and not result.paper_done
     assert result.robust["mass_rel"] < 0.03 and result.baseline["mass_rel"] < 0.02
     assert result.baseline["relative_positions_m"] < 0.005
+    # Every robot's published estimates are kept, and at the current factors the calibration
+    # counts inside exactly what the benchmark does.
+    found = result.intervals
+    assert len(found["moment"]) == len(found["own_mass"]) == 4
+    assert all(s.fit_std is not None and s.fit_std > 0.0 for s in found["moment"])
+    mass, moment, offset, _, robots = published_variance([result])
+    for factor, key in (
+        (mass, "mass_rel"),
+        (moment, "moment_rel"),
+        (offset, "contact_to_com_m"),
+        (robots, "relative_positions_m"),
+    ):
+        inside, published = coverage([result], key)
+        assert len(factor.needed) == published
+        assert sum(k <= factor.factor for k in factor.needed) == inside
     assert result.robust["relative_positions_m"] < 0.01
     assert result.paper["mass_rel"] is None
     assert all(len(flags) == 4 for flags in result.inside.values())
