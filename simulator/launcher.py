@@ -709,13 +709,15 @@ class _Watch:
         collector = self.collector
         next_report = every_s
         while not collector.finished():
-            if stop.is_set():
-                return Verdict(INTERRUPTED, "asked to stop")
             collector.drain(0.05)
             t = collector.latest_tick * self.scenario.period_s
             if progress is not None and t >= next_report:
                 progress(t, ", ".join(sorted(collector.phase_ticks, key=collector.phase_ticks.get)))
                 next_report += every_s
+            # Asked to stop is asked first: a Ctrl-C reaches the whole process group, and the
+            # router or the plant that stopped on it is not a lost process.
+            if stop.is_set():
+                return Verdict(INTERRUPTED, "asked to stop")
             verdict = self._processes() or self._stalled()
             if verdict is not None:
                 return verdict

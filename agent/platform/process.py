@@ -19,7 +19,8 @@ a signal's handler."""
 
 
 class StopEvent(threading.Event):
-    """An event whose wait without a timeout wakes every :data:`SIGNAL_POLL_S`.
+    """An event whose wait without a timeout wakes every :data:`SIGNAL_POLL_S`, and that a
+    signal's handler can mark set at once (:meth:`mark`).
 
     Python runs a signal's handler in the main thread only, at its next bytecode; a signal the
     kernel hands to another thread (one of Zenoh's, the log relay's) only marks it pending, and
@@ -27,11 +28,27 @@ class StopEvent(threading.Event):
     router`` (``stop.wait()``) was still running 8 s after SIGTERM in 3 of 32 runs; waking
     every 0.5 s, in none of 30."""
 
+    def __init__(self) -> None:
+        super().__init__()
+        self._marked = False
+
+    def mark(self) -> None:
+        """Set, as far as :meth:`is_set` and :meth:`wait` tell, without taking the event's lock
+        (which the thread running a signal's handler may hold); waiters blocked in
+        :meth:`wait` wake once :meth:`set` is called too, or at their next poll."""
+        self._marked = True
+
+    def is_set(self) -> bool:
+        return self._marked or super().is_set()
+
     def wait(self, timeout: float | None = None) -> bool:
+        if self._marked:
+            return True
         if timeout is not None:
-            return super().wait(timeout)
+            return super().wait(timeout) or self._marked
         while not super().wait(SIGNAL_POLL_S):
-            pass
+            if self._marked:
+                return True
         return True
 
 
@@ -42,10 +59,12 @@ class StopSignals:
 
     - :meth:`handle` (from the main thread): a Python handler. It runs in the main thread
       between two bytecodes, possibly while that thread holds the event's own lock (inside
-      ``wait`` or ``set``); setting the event there could deadlock, so a short-lived thread
-      sets it. Inside :meth:`raising` the handler also raises ``KeyboardInterrupt`` where the
-      main thread is, for work that does not look at the event (a simulation loop, plots, a
-      child's wait).
+      ``wait`` or ``set``); setting the event there could deadlock, so the handler only marks
+      it (:meth:`StopEvent.mark`: whoever asks the event sees it set at once, before anything
+      the same signal did elsewhere, such as a child process that stopped on it) and a
+      short-lived thread sets it, waking its waiters. Inside :meth:`raising` the handler also
+      raises ``KeyboardInterrupt`` where the main thread is, for work that does not look at
+      the event (a simulation loop, plots, a child's wait).
     - :meth:`take`: no Python handler. The signals are blocked in the calling thread (call it
       from the main thread before any other thread starts, so that every thread inherits the
       mask) and a thread of its own takes them with ``sigwait``. The AGV bridge uses it:
@@ -86,6 +105,7 @@ class StopSignals:
         # takes a lock.
         if self.received is None:
             self.received = signal.Signals(signum)
+        self.event.mark()
         threading.Thread(target=self.event.set, name="stop-signal", daemon=True).start()
         if self._raising:
             raise KeyboardInterrupt

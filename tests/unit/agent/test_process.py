@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 
 import pytest
@@ -45,3 +46,36 @@ def test_outside_raising_a_stop_signal_only_asks() -> None:
     with StopSignals().handle() as stop:
         os.kill(os.getpid(), signal.SIGINT)  # not a KeyboardInterrupt here
         assert stop.event.wait(10) and stop.received == signal.SIGINT
+
+
+class _NeverStarted:
+    """A thread that never runs: the event's lock is never taken to set it."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        pass
+
+    def start(self) -> None:
+        pass
+
+
+def test_the_event_is_set_as_soon_as_the_handler_ran(monkeypatch) -> None:
+    """Whoever asks after the handler ran sees the stop, before any thread sets the event: a
+    run that finds its router gone because the same Ctrl-C stopped it was asked to stop, not
+    left by its router."""
+    monkeypatch.setattr("agent.platform.process.threading.Thread", _NeverStarted)
+    with StopSignals().handle() as stop:
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(1000):  # the handler runs at the next bytecode
+            if stop.received is not None:
+                break
+            time.sleep(0.01)
+        assert stop.received == signal.SIGINT
+        assert stop.event.is_set() and stop.event.wait() and stop.event.wait(0.01)
+        assert not threading.Event.is_set(stop.event)  # nothing took the event's lock
+
+
+def test_an_event_marked_wakes_a_waiter_at_its_next_poll() -> None:
+    event = StopEvent()
+    assert not event.is_set() and not event.wait(0.01)
+    threading.Timer(0.05, event.mark).start()
+    assert event.wait()  # no timeout: woken by its poll within SIGNAL_POLL_S
