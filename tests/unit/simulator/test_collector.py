@@ -3,11 +3,16 @@ Zenoh, whatever the order in which its messages arrive."""
 
 from __future__ import annotations
 
+import threading
+import time
 from types import SimpleNamespace
 
 from agent.platform.protocol import Estimates, Keys, Phase, Truth, encode
 from simulator import launcher
+from simulator.lockstep import INTERRUPTED, Verdict
+from simulator.scenario import load_scenario
 from tests.helpers.fakes import FakeFifo
+from tests.helpers.paths import PAPER
 
 
 class _Subscriptions:
@@ -70,3 +75,45 @@ def test_the_final_instant_is_the_first_at_which_every_robot_is_done(monkeypatch
             monkeypatch.setattr(launcher, "FINAL_GRACE_S", 0.0)
             assert collector.finished() and collector.final.truth.tick == 101
             monkeypatch.undo()
+
+
+class _StoppedByTheSameSignal:
+    """A collector during whose drain Ctrl-C reached the process group: the launcher's stop is
+    set and the router, which took the same SIGINT, has exited."""
+
+    latest_tick = 100
+    advanced_at = None
+
+    def __init__(self, stop, router) -> None:
+        self.stop, self.router = stop, router
+
+    def finished(self) -> bool:
+        return False
+
+    def drain(self, timeout: float) -> None:
+        self.stop.set()
+        self.router.code = 0
+
+
+class _Process:
+    def __init__(self) -> None:
+        self.code = None
+
+    def poll(self):
+        return self.code
+
+
+def test_a_ctrl_c_that_also_stopped_the_router_is_an_interrupted_run() -> None:
+    """Asked to stop is judged before the processes: the router gone after the same SIGINT is
+    not a lost router."""
+    stop = threading.Event()
+    router, plant = SimpleNamespace(process=_Process()), SimpleNamespace(process=_Process())
+    collector = _StoppedByTheSameSignal(stop, router.process)
+    scenario = load_scenario(PAPER)
+    watch = launcher._Watch(collector, router, plant, [], scenario)
+    verdict = watch.run(stop, None, 1.0, time.perf_counter() + 60)
+    assert verdict == Verdict(INTERRUPTED, "asked to stop")
+    stop.clear()  # not asked to stop: the router gone is a lost router
+    router.process.code = None
+    collector.stop = threading.Event()
+    assert watch.run(stop, None, 1.0, time.perf_counter() + 60).reason == launcher.ROUTER_LOST
