@@ -196,3 +196,11 @@ def test_the_seeds_run_start_at_first_seed(monkeypatch) -> None:
     assert seen == [20, 21, 22]
     report = format_noise_report([_result(20, 1.0), _result(21, 1.0)], NoiseSettings(), "x", 1.0)
     assert "2 seeds (20-21)" in report.splitlines()[0]
+
+
+def test_the_commands_default_seeds_are_the_settings_default() -> None:
+    """``heft bench noise|sweep|changes`` state their default seeds without importing the
+    benchmark (numpy): the same number as :class:`NoiseSettings`'s."""
+    from simulator.bench.cli import NOISE_SEEDS
+
+    assert NOISE_SEEDS == NoiseSettings().seeds
