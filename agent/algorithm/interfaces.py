@@ -48,6 +48,12 @@ class OwnEstimates(Protocol):
         """``Ĵ`` (Step 4)."""
         ...
 
+    @property
+    def friction_torque(self) -> tuple[float, float] | None:
+        """``(τ̂_c, σ)``: the floor's friction torque about the COM while the load turns, and
+        its standard deviation (N m; ``None``: not estimated)."""
+        ...
+
     def settled(self, phase: Phase) -> bool:
         """Whether the estimates that ``phase`` is for have settled (excite: Steps 1–3 and
         ``w``; inertia: ``Ĵ``; push: ``z_C`` and ``m̂``)."""

@@ -121,6 +121,11 @@ class EstimationPipeline:
         """``m̂`` (Step 7)."""
         return None if self.mass_estimator is None else self.mass_estimator.estimate
 
+    @property
+    def friction_torque(self) -> tuple[float, float] | None:
+        """``(τ̂_c, σ)``: the floor's friction torque (``None``: the family estimates none)."""
+        return None
+
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C`` after the rotation ``alpha`` since the push began (Step 5)."""
         return self.com.com_offset(alpha) if self.com is not None else None

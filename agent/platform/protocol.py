@@ -151,6 +151,9 @@ class Estimates:
     ``relative_positions_cov[j]`` are covariances ``(xx, xy, yy)`` (m²) of those vectors.
     ``drive_gain`` is the robot's estimate of its own drive's gain (applied over commanded
     force, :mod:`agent.algorithm.robust.drive_gain`), ``drive_gain_std`` its standard deviation.
+    ``friction_torque`` (N m) is the floor's friction torque about the COM while the load turns
+    and ``spin_drag`` (N/m) its drag on the COM then (``−κ ṗ_C / |ω|``), each with its standard
+    deviation (docs/estimator.md, "Friction").
 
     ``load_changes`` counts the team's restarts at Step 4 for a changed load and ``rejoins`` its
     new beginnings from Step 1 after a halt (:mod:`agent.algorithm.coordination`);
@@ -184,6 +187,10 @@ class Estimates:
     load_changes: int = 0
     change_score: float | None = None
     rejoins: int = 0
+    friction_torque: float | None = None
+    friction_torque_std: float | None = None
+    spin_drag: float | None = None
+    spin_drag_std: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -487,7 +494,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 8
+WIRE_VERSION = 9
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -499,7 +506,7 @@ class DecodeError(ValueError):
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
 _CLOCK = _struct.Struct("<qd")
-_ESTIMATES = _struct.Struct("<HqBqHBBBBHH")
+_ESTIMATES = _struct.Struct("<HqBqIBBBBHH")
 """robot, tick, phase, phase_since, which optional values follow (bit per
 :data:`_OPTIONAL_ESTIMATES` entry), how many relative positions, their covariances,
 started and settled steps follow them, then the load changes and the rejoins."""
@@ -522,6 +529,10 @@ _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("drive_gain", 1),
     ("drive_gain_std", 1),
     ("change_score", 1),
+    ("friction_torque", 1),
+    ("friction_torque_std", 1),
+    ("spin_drag", 1),
+    ("spin_drag_std", 1),
 )
 """The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
@@ -803,7 +814,14 @@ def _estimates(m: Estimates) -> None:
         _covariance("estimates.relative_positions_cov", cov)
     if m.contact_to_com_cov is not None:
         _covariance("estimates.contact_to_com_cov", m.contact_to_com_cov)
-    for name in ("mass_std", "moment_std", "drive_gain_std", "change_score"):
+    for name in (
+        "mass_std",
+        "moment_std",
+        "drive_gain_std",
+        "change_score",
+        "friction_torque_std",
+        "spin_drag_std",
+    ):
         value = getattr(m, name)
         if value is not None:
             _within(f"estimates.{name}", value, 0.0, _math.inf)

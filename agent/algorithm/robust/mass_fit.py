@@ -24,6 +24,16 @@ the load's rotation since ``t₀``. Where eq. (7)'s ``ṗ_C = ṗ_Ci − ω o⊥
 times the offset (centimetres per second), the displacement's error is the velocity noise's
 random walk.
 
+On a real floor the COM also feels friction's force. While the load turns fast compared with
+its COM's speed (``‖ṗ_C‖ ≪ |ω| r`` at the supports, as this experiment keeps it), Coulomb
+friction at supports ``r_k`` under normal loads ``N_k`` pulls the COM back with
+``μ Σ N_k r̂_k r̂_kᵀ ṗ_C / (|ω| ‖r_k‖)`` to first order, whose mean over the load's turns is
+``κ ṗ_C / |ω|`` with ``κ = μ Σ N_k / (2‖r_k‖)`` (N/m, the *spin drag*): a fourth column
+``−D``, ``D(t) = ∫∫ ṗ_C / |ω| = ∫ (∫ dp_C / |ω|) dt`` (the displacement's increments over
+each interval divided by that interval's ``|ω|``, from the load's rotation), with the
+unknown ``κ / m``, takes it up; ``κ̂`` is published (0 on a frictionless floor, within its
+uncertainty). A viscous drag ``−b ṗ_C`` adds ``b |ω|`` to ``κ`` while ``ω`` is steady.
+
 Uncertainty: the fit's ``σ̂² M⁻¹`` as it is, every row counted (over 40 runs of the paper's
 scenario at 1 cm/s, seeds 0–39, the rows counted one per 0.2 s gave standard deviations eight
 times the errors'); ``std(m̂) = std(1/m) m̂²``. ``heft bench calibrate correlation-time``
@@ -39,8 +49,15 @@ commanded force for the applied one; the pipeline scales its ``m`` by the drives
 
 from __future__ import annotations
 
+import math
+
 from agent.algorithm.robust.least_squares import ReciprocalFit
 from agent.platform.geometry import Vec2, rotate
+
+
+MIN_SPIN = 0.05
+"""rad/s: the ``|ω|`` below which the spin drag's column takes this instead (a load barely
+turning is outside the friction model's range; the floor keeps it from dividing by 0)."""
 
 
 class MassFit(ReciprocalFit):
@@ -50,7 +67,8 @@ class MassFit(ReciprocalFit):
     correlation_time = 0.0  # each row counts: measured (below)
 
     def __init__(self, n: int, force: Vec2, forgetting: float = 1.0, lag: float = 0.0):
-        super().__init__(3, forgetting)  # rows [t, 0, n f_x (S − τ_d Σ)], [0, t, n f_y (…)]
+        # rows [t, 0, n f_x (S − τ_d Σ), −D_x], [0, t, n f_y (…), −D_y] (v₀ₓ, v₀ᵧ, 1/m, κ/m)
+        super().__init__(4, forgetting)
         self.n = n
         self.total_force = (n * force[0], n * force[1])
         self._added_once: Vec2 = (0.0, 0.0)
@@ -66,6 +84,12 @@ class MassFit(ReciprocalFit):
         self._travel: Vec2 = (0.0, 0.0)
         """``∫ṗ_Ci dt`` since the first sample."""
         self._angle0 = 0.0
+        self._angle = 0.0
+        self._displacement: Vec2 = (0.0, 0.0)
+        self._drag_once: Vec2 = (0.0, 0.0)
+        """``∫ dp_C / |ω|`` since the first sample."""
+        self._drag_twice: Vec2 = (0.0, 0.0)
+        """``D = ∫∫ ṗ_C / |ω|`` since the first sample."""
 
     def update(
         self,
@@ -84,6 +108,7 @@ class MassFit(ReciprocalFit):
         if not self.started:
             self.started = True
             self._velocity, self._angle0 = velocity, angle
+            self._angle = angle
             return
         v0 = self._velocity
         travel = self._travel
@@ -109,6 +134,28 @@ class MassFit(ReciprocalFit):
         (ox, oy), (tx, ty) = self._added_once, self._added_twice
         ax = self.n * (tx - lag * ox + lag * lag * added[0])
         ay = self.n * (ty - lag * oy + lag * lag * added[1])
-        self.fit.add((t, 0.0, pushed * fx + ax), dx)
-        self.fit.add((0.0, t, pushed * fy + ay), dy)
+        # Friction's spin drag: the displacement's increment over |ω| (ω from the rotation).
+        spin = max(abs(angle - self._angle) / dt, MIN_SPIN)
+        self._angle = angle
+        (px, py), (qx, qy) = self._displacement, self._drag_once
+        once = (qx + (dx - px) / spin, qy + (dy - py) / spin)
+        self._displacement, self._drag_once = (dx, dy), once
+        twice = self._drag_twice
+        self._drag_twice = (
+            twice[0] + 0.5 * dt * (qx + once[0]),
+            twice[1] + 0.5 * dt * (qy + once[1]),
+        )
+        (drag_x, drag_y) = self._drag_twice
+        self.fit.add((t, 0.0, pushed * fx + ax, -drag_x), dx)
+        self.fit.add((0.0, t, pushed * fy + ay, -drag_y), dy)
         self._solve()
+
+    def spin_drag(self, gain: float = 1.0) -> tuple[float, float] | None:
+        """``(κ̂, σ)`` (N/m): the floor's spin drag ``κ = p₄/p₃`` times the drives' mean
+        ``gain`` (which scales ``m̂`` alike), and its standard deviation (first order)."""
+        fit = self._solution
+        if fit is None:
+            return None
+        p3, p4 = fit.estimate[2], fit.estimate[3]
+        gradient = (0.0, 0.0, -p4 / (p3 * p3), 1.0 / p3)
+        return gain * p4 / p3, gain * math.sqrt(fit.variance_of(gradient, self._scale))

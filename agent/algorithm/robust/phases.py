@@ -5,7 +5,11 @@
   (after braking first for ``inertia_brake_s``: with half a flip, ω swings about the turn the
   load had, by half of what speeding up first adds to it, which keeps a compact, light load's
   turn on its floor);
-- *push*: the configured ``push_force``, the same for every robot whatever its Ĵ; with
+- *push*: the configured ``push_force``, the same for every robot whatever its Ĵ, plus the
+  torque that keeps the load turning against the floor's friction: ``f_i += s_ω (τ̂_c / w)
+  z_i⊥`` (eq. 14's form: no net force, torque ``s_ω τ̂_c``, ``τ̂_c`` Step 4's estimate when
+  the push began), so that Steps 5 and 7 see a load that turns fast compared with its COM's
+  speed, where their friction model holds (docs/estimator.md, "Friction"); with
   ``push_damping = b`` each robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity
   (which every robot estimates alike), so that a light load's speed stays within about ``f/b``
   and a heavy one's drift dies out (Steps 5 and 7 take the force as commanded); after an odd
@@ -24,6 +28,7 @@
 
 from __future__ import annotations
 
+from agent.algorithm.estimation.inertia import inertia_force
 from agent.algorithm.interfaces import OwnEstimates
 from agent.algorithm.phase_machine import Law, PhaseMachine, Ready, _never_ready
 from agent.algorithm.safety import saturate
@@ -63,7 +68,10 @@ class RobustPhases(PhaseMachine):
         return -1.0 if self.load_changes % 2 else 1.0
 
     def _pushing(self, k: int, own: OwnEstimates, velocity: Vec2, push: Vec2) -> Vec2:
-        """The push with ``push_damping``'s ``−b ṗ̂_G`` added (recorded for Steps 5 and 7)."""
+        """The push with the torque against friction and ``push_damping``'s ``−b ṗ̂_G`` added
+        (the damping recorded for Steps 5 and 7)."""
+        keep = self._keep_turning(k, own)
+        push = (push[0] + keep[0], push[1] + keep[1])
         b = self.tuning.robust.push_damping
         if not b > 0.0:
             return push
@@ -77,6 +85,16 @@ class RobustPhases(PhaseMachine):
         )
         self._damping[k] = (force[0] - push[0], force[1] - push[1])
         return force
+
+    def _keep_turning(self, k: int, own: OwnEstimates) -> Vec2:
+        """``s_ω (τ̂_c / w) z_i⊥``, ``z_i`` turned to the middle of tick ``k``: the team's torque
+        ``s_ω τ̂_c`` against the floor's friction (zero on a frictionless floor)."""
+        w = self.n * own.mean_square_offset
+        if not self.friction_used > 0.0 or not w > 0.0:
+            return (0.0, 0.0)
+        lead = (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
+        z = rotate(own.centroid, lead)
+        return inertia_force(self.spin_sign * self.friction_used / w, z)
 
     # ---------------------------------------------------------------- once done: probes
     def _done_laws(self) -> tuple[Ready, Law]:
