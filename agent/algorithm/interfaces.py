@@ -95,6 +95,14 @@ class Schedule(Protocol):
         """The mean sign of the common force over ticks ``first..last − 1``."""
         ...
 
+    def swinging(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are in the push's stage for Step 5."""
+        ...
+
+    def translating(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are in the push's stage for Step 7."""
+        ...
+
     def mean_push_damping(self, first: int, last: int) -> Vec2:
         """The mean force each robot added to the push over ticks ``first..last − 1``."""
         ...

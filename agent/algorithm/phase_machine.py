@@ -254,6 +254,16 @@ class PhaseMachine:
             return first
         return -first if (since - period // 2) // period % 2 == 0 else first
 
+    def swinging(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are all in the push's stage for Step 5 (the load
+        swinging about its COM as it turns): the whole push, unless a family stages it."""
+        return True
+
+    def translating(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are all in the push's stage for Step 7: the whole
+        push, unless a family stages it."""
+        return True
+
     def mean_push_damping(self, first: int, last: int) -> Vec2:
         """The mean of what each robot added to the common force over ticks ``first..last − 1``
         (zero unless the family damps the push)."""

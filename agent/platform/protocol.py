@@ -152,8 +152,9 @@ class Estimates:
     ``drive_gain`` is the robot's estimate of its own drive's gain (applied over commanded
     force, :mod:`agent.algorithm.robust.drive_gain`), ``drive_gain_std`` its standard deviation.
     ``friction_torque`` (N m) is the floor's friction torque about the COM while the load turns
-    and ``spin_drag`` (N/m) its drag on the COM then (``−κ ṗ_C / |ω|``), each with its standard
-    deviation (docs/estimator.md, "Friction").
+    and ``coulomb`` its kinetic friction coefficient ``μ`` (the force ``−μ m g`` against the COM's
+    motion while the load translates), each with its standard deviation (docs/estimator.md,
+    "Friction").
 
     ``load_changes`` counts the team's restarts at Step 4 for a changed load and ``rejoins`` its
     new beginnings from Step 1 after a halt (:mod:`agent.algorithm.coordination`);
@@ -189,8 +190,8 @@ class Estimates:
     rejoins: int = 0
     friction_torque: float | None = None
     friction_torque_std: float | None = None
-    spin_drag: float | None = None
-    spin_drag_std: float | None = None
+    coulomb: float | None = None
+    coulomb_std: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -531,8 +532,8 @@ _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("change_score", 1),
     ("friction_torque", 1),
     ("friction_torque_std", 1),
-    ("spin_drag", 1),
-    ("spin_drag_std", 1),
+    ("coulomb", 1),
+    ("coulomb_std", 1),
 )
 """The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
@@ -820,7 +821,7 @@ def _estimates(m: Estimates) -> None:
         "drive_gain_std",
         "change_score",
         "friction_torque_std",
-        "spin_drag_std",
+        "coulomb_std",
     ):
         value = getattr(m, name)
         if value is not None:

@@ -10,7 +10,8 @@ linear in ``(θ₀, ω₀, 1/J)``: least squares on the rows ``[1, t − t₀, �
 ``−τ_c sgn ω`` while it turns (Coulomb friction at its supports, exact for a spin about the
 COM; the experiment keeps the load turning one way, so ``sgn ω`` is the turn's sign ``s_ω``):
 a fifth column ``Σ_ω(t) = ∫∫ s_ω = s_ω (t − t₀)²/2`` with the unknown ``−τ_c / J`` takes it up,
-and ``τ̂_c = −p₅/p₃`` is published (0 on a frictionless floor, within its uncertainty). A drive applies its command through a lag (``actuators.time_constant_s``): to
+and ``τ̂_c = −p₅/p₃`` is published (0 on a frictionless floor, within its uncertainty).
+A drive applies its command through a lag (``actuators.time_constant_s``): to
 first order the torque then acts ``τ_d`` late, ``Φ(t − τ_d) ≈ Φ(t) − τ_d Ω(t)`` with
 ``Ω = ∫τ``, so a fourth column ``Ω`` with the unknown ``−τ_d / J`` takes it up (zero for ideal
 drives). The angle ``θ`` is the rotation the team tracks from its arc fits (Step 1, the
@@ -53,7 +54,7 @@ class InertiaFit(ReciprocalFit):
         """``Σ_ω = ∫∫ sgn ω`` since the first sample."""
         self._spin_once = 0.0
 
-    def update(self, angle: float, torque: float, dt: float, spin: float = 1.0) -> None:
+    def update(self, angle: float, torque: float, dt: float, *, spin: float = 1.0) -> None:
         """Feed the rotation ``angle`` (rad) at the end of an interval ``dt`` during which the
         team's torque was ``torque`` and the load turned the way ``spin`` (``±1``); the first
         call only marks the start."""

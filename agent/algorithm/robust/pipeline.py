@@ -189,7 +189,7 @@ class RobustPipeline(EstimationPipeline):
 
     def _update_inertia(self, torque: float, span: float) -> None:
         # the rotation angle, not ω; friction's torque against the turn
-        self.inertia.update(self.angle, torque, span, self._spin)
+        self.inertia.update(self.angle, torque, span, spin=self._spin)
 
     @property
     def _spin(self) -> float:
@@ -209,13 +209,6 @@ class RobustPipeline(EstimationPipeline):
         team_gain_std = (self.drive.std or 0.0) / math.sqrt(self.n)
         return torque * gain, math.hypot(std * gain, torque * gain * team_gain_std)
 
-    @property
-    def spin_drag(self) -> tuple[float, float] | None:
-        """``(κ̂, σ)`` (N/m): the floor's drag on the COM while the load turns (Step 7's fit,
-        :mod:`agent.algorithm.robust.mass_fit`), scaled like ``m̂`` by the drives' mean gain."""
-        fit = self.mass_estimator
-        return None if fit is None else fit.spin_drag(self.consensus["mean_gain"])
-
     def _new_com(self, schedule: ProbeSchedule) -> ComFit:
         self.lag = self.inertia.lag  # the drives' lag, which Step 4's fit found
         return ComFit(self.n, schedule.moment_used, schedule.push, self.forgetting, self.lag)
@@ -229,7 +222,22 @@ class RobustPipeline(EstimationPipeline):
     def _update_mass(
         self, velocity: Vec2, offset: Vec2, sign: float, span: float, added: Vec2
     ) -> None:
-        self.mass_estimator.update(velocity, offset, self.angle, sign, span, added=added)
+        self.mass_estimator.update(
+            velocity,
+            offset,
+            self.angle,
+            sign,
+            span,
+            added=added,
+            com_velocity=self.com_velocity,
+        )
+
+    @property
+    def coulomb(self) -> tuple[float, float] | None:
+        """``(μ̂, σ)``: the floor's kinetic friction coefficient (Step 7's fit while the load
+        translates, :mod:`agent.algorithm.robust.mass_fit`)."""
+        fit = self.mass_estimator
+        return None if fit is None else fit.coulomb
 
     def _forget_load(self) -> None:
         super()._forget_load()
@@ -350,7 +358,7 @@ class RobustPipeline(EstimationPipeline):
         }
         for key, found in (
             ("friction_torque", self.friction_torque),
-            ("spin_drag", self.spin_drag),
+            ("coulomb", self.coulomb),
         ):
             if found is not None:
                 scale = math.sqrt(PUBLISHED_VARIANCE.get(key, 1.0))

@@ -109,6 +109,7 @@ class Own:
     centroid: Vec2 = (0.0, 0.0)
     mean_square_offset: float = 0.0
     moment: float | None = None
+    friction_torque: tuple[float, float] | None = None
     com_velocity: Vec2 | None = None
     changed: bool = False
 
