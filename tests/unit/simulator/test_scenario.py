@@ -14,8 +14,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.algorithm.tuning import AgentTuning
-from agent.platform.config import ConfigError
+from agent.algorithm.tuning import PAPER_REFERENCE, AgentTuning, Estimators
+from agent.platform.config import ConfigError, from_table
 from agent.platform.heft import main
 from simulator.generate import GRAPH_KINDS, generate_scenario
 from simulator.scenario import (
@@ -74,7 +74,9 @@ def test_paper_scenario_loads_with_the_papers_values() -> None:
     assert s.run.seed == 1
     assert s.period_s == pytest.approx(0.01)
     assert s.substeps == 10
-    assert s.agent == AgentTuning()
+    # the paper's estimators, the reference, and the defaults but for their keys
+    assert s.agent == from_table(AgentTuning, PAPER_REFERENCE, "agent")
+    assert s.agent.estimator is Estimators.PAPER and AgentTuning().estimator is Estimators.ROBUST
     assert s.body.position == (0.0, 0.0) and s.body.angle == 0.0
 
 
