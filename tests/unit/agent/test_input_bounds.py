@@ -26,6 +26,7 @@ from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds
 from agent.platform.heft import main
 from agent.platform.zenoh_session import ZenohSettings
 from bridge.config import CanSettings
+from simulator.polygon import polygon_diameter
 from simulator.scenario import (
     MAX_COORDINATE,
     MAX_POSITION,
@@ -38,7 +39,6 @@ from simulator.scenario import (
     Sensors,
     _BodyTable,
     load_scenario,
-    polygon_diameter,
 )
 from tests.helpers.bad_input import paper, refused, robot_file, scenario_file
 from tests.helpers.paths import PAPER, ROOT
