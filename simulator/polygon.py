@@ -129,3 +129,51 @@ def first_self_intersection(polygon: Sequence[Vec2]) -> tuple[int, int] | None:
             if segments_intersect(*edges[i], *edges[j]):
                 return i, j
     return None
+
+
+def clipped_to_box(polygon: Sequence[Vec2], low: Vec2, high: Vec2) -> list[Vec2]:
+    """The part of ``polygon`` inside the box ``[low, high]`` (Sutherland–Hodgman: the box is
+    convex, the polygon may be concave). Where the part falls apart into pieces, they come
+    joined by edges of zero area, so the shoelace sums of the result (its area, its centroid)
+    are those of the whole part; empty when nothing is inside."""
+    part = list(polygon)
+    sides = ((0, low[0], True), (0, high[0], False), (1, low[1], True), (1, high[1], False))
+    for axis, bound, keep_above in sides:  # each side's half-plane in turn
+        if not part:
+            break
+        inside = [(p[axis] >= bound) == keep_above for p in part]
+        clipped: list[Vec2] = []
+        for k, p in enumerate(part):
+            q, q_inside = part[k - 1], inside[k - 1]
+            if inside[k] != q_inside:
+                s = (bound - q[axis]) / (p[axis] - q[axis])
+                cut = (q[0] + s * (p[0] - q[0]), q[1] + s * (p[1] - q[1]))
+                clipped.append((bound, cut[1]) if axis == 0 else (cut[0], bound))
+            if inside[k]:
+                clipped.append(p)
+        part = clipped
+    return part
+
+
+def area_cells(polygon: Sequence[Vec2], count: int) -> list[tuple[Vec2, float]]:
+    """The polygon cut into about ``count`` cells of equal size or less: a grid over its
+    bounding box of ``⌈w/h_c⌉ × ⌈h/h_c⌉`` cells, ``h_c = √(A/count)`` (so a concave or slanted
+    polygon keeps its share), each clipped to the polygon. Each cell present as its part's
+    centroid and area, row by row; their areas sum to the polygon's and their first moments
+    to its centroid's (exactly but for rounding, since each part's are exact)."""
+    xs, ys = [p[0] for p in polygon], [p[1] for p in polygon]
+    area = polygon_signed_area(polygon)
+    side = math.sqrt(area / count)
+    x0, y0, width, height = min(xs), min(ys), max(xs) - min(xs), max(ys) - min(ys)
+    columns, rows = max(1, math.ceil(width / side)), max(1, math.ceil(height / side))
+    cells = []
+    for j in range(rows):
+        for i in range(columns):
+            low = (x0 + width * i / columns, y0 + height * j / rows)
+            high = (x0 + width * (i + 1) / columns, y0 + height * (j + 1) / rows)
+            part = clipped_to_box(polygon, low, high)
+            if len(part) < 3 or polygon_signed_area(part) <= 1e-12 * area:
+                continue  # outside the polygon, or a sliver of no weight
+            part_area, centroid, _ = polygon_area_centroid_moment(part, 1.0)
+            cells.append((centroid, part_area))
+    return cells

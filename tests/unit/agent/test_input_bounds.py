@@ -38,6 +38,7 @@ from simulator.scenario import (
     RunSettings,
     Sensors,
     _BodyTable,
+    _GroundTable,
     load_scenario,
 )
 from tests.helpers.bad_input import paper, refused, robot_file, scenario_file
@@ -239,6 +240,7 @@ SCENARIO_CASES = [
     *_cases("sensors", Sensors),
     *_cases("actuators", Actuators),
     *_cases("floor", Floor),
+    *_cases("ground", _GroundTable),
     *_cases("run", RunSettings),
     *_cases("agent", AgentTuning),
     *_cases("agent.paper", PaperTuning),
@@ -428,6 +430,7 @@ def _documented_limits() -> str:
         ("sensors", Sensors),
         ("actuators", Actuators),
         ("floor", Floor),
+        ("ground", _GroundTable),
         ("run", RunSettings),
         ("events", LoadChange),
         ("agent", AgentTuning),
