@@ -270,6 +270,12 @@ class Truth:
     """Its torque about the COM, averaged likewise (N m)."""
 
     @property
+    def coulomb_torque(self) -> float:
+        """``τ_c = μ m g c`` (N m): the floor's Coulomb friction torque on a spin about the COM,
+        what the robust estimators' ``friction_torque`` estimates."""
+        return self.ground_coulomb * self.mass * GRAVITY * self.friction_radius
+
+    @property
     def centroid(self) -> Vec2:
         """``p_G``, the centroid of the contact points."""
         n = len(self.contacts)

@@ -53,9 +53,8 @@ import math
 
 from agent.algorithm.robust.least_squares import ReciprocalFit
 from agent.platform.geometry import Vec2, rotate
+from agent.platform.protocol import GRAVITY
 
-GRAVITY = 9.81
-"""m/s²: ``g``, which turns the fitted deceleration ``μ g`` into the coefficient ``μ``."""
 TURNING = 0.9
 """``v̂₀ · v̂₁`` below which an interval's direction of motion is integrated over
 :data:`PIECES` pieces of it (the velocity passed near zero, or turned fast), not as a

@@ -18,13 +18,13 @@ from agent.algorithm.robust.com_fit import ComFit
 from agent.algorithm.robust.drive_gain import DriveGain
 from agent.algorithm.robust.inertia_fit import InertiaFit
 from agent.algorithm.robust.least_squares import LeastSquares
-from agent.algorithm.robust.mass_fit import GRAVITY, MassFit
+from agent.algorithm.robust.mass_fit import MassFit
 from agent.algorithm.robust.phases import RobustPhases
 from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
 from agent.platform.config import ConfigError, from_table, to_toml
 from agent.platform.geometry import rotate
-from agent.platform.protocol import Phase
+from agent.platform.protocol import GRAVITY, Phase
 
 DT = 0.01
 
@@ -228,8 +228,9 @@ def test_mass_fit_finds_the_floors_coulomb_friction_while_the_load_translates(
     mu: float, mass: float, push: float, tolerance: float
 ) -> None:
     """A load that translates (no turn) under a reversing push ``±n f`` slides against
-    ``−μ m g v̂_C``: the fit finds ``m`` and ``μ`` (the velocity is taken to change linearly over a tick, which places a reversal within a
-    fraction of one: the larger ``μ``, the more that costs)."""
+    ``−μ m g v̂_C``: the fit finds ``m`` and ``μ`` (the velocity is taken to change linearly
+    over a tick, which places a reversal within a fraction of one: the larger ``μ``, the more
+    that costs)."""
     n, force, offset = 4, (0.0, push), (1.2, -0.7)
     commanded, _ = _reversing_push(8.0, 2.0)
     fit = MassFit(n, force)
