@@ -21,14 +21,13 @@ from typing import Any
 import numpy as np
 
 from agent.algorithm.tuning import PAPER_REFERENCE
-from simulator.scenario import (
-    Scenario,
+from simulator.polygon import (
     distance_to_boundary,
-    parse_scenario,
     point_in_polygon,
     polygon_area_centroid_moment,
     polygon_diameter,
 )
+from simulator.scenario import Scenario, parse_scenario
 
 GRAPH_KINDS = ("line", "ring", "star", "random")
 CONVEX_SHAPES = ("hull", "rectangle", "ellipse")

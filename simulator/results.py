@@ -45,7 +45,7 @@ from agent.platform.evaluation import (
 )
 
 if TYPE_CHECKING:
-    from agent.platform.protocol import Estimates
+    from agent.platform.protocol import Estimates, Truth
     from simulator.inprocess import RunOutcome
     from simulator.scenario import Scenario
 
@@ -100,6 +100,24 @@ def _truth_dict(outcome: RunOutcome) -> dict[str, Any]:
         "omega": _number(truth.omega),
         "com_offset": _vec(truth.com_offset),
         "robots": robots,
+        "ground": ground_dict(truth),
+    }
+
+
+def ground_dict(truth: Truth) -> dict[str, Any]:
+    """The floor under the load as the plant applied it at the final instant (all zero without
+    friction): ``coulomb`` μ, ``static`` μ_s, ``viscous`` b (N s/m), ``friction_radius`` c (m:
+    a pure spin meets ``μ m g c``), ``viscous_radius2`` ρ² (m²: a spin meets ``b ρ² ω``), and
+    the floor's ``friction_force`` (N, ``[x, y]``) and ``friction_torque`` (N m, about the COM)
+    averaged over the last period."""
+    return {
+        "coulomb": _number(truth.ground_coulomb),
+        "static": _number(truth.ground_static),
+        "viscous": _number(truth.ground_viscous),
+        "friction_radius": _number(truth.friction_radius),
+        "viscous_radius2": _number(truth.viscous_radius2),
+        "friction_force": _vec(truth.friction_force),
+        "friction_torque": _number(truth.friction_torque),
     }
 
 

@@ -18,12 +18,12 @@ from agent.algorithm.tuning import PAPER_REFERENCE, AgentTuning, Estimators
 from agent.platform.config import ConfigError, from_table
 from agent.platform.heft import main
 from simulator.generate import GRAPH_KINDS, generate_scenario
+from simulator.polygon import polygon_area_centroid_moment
 from simulator.scenario import (
     Scenario,
     ScenarioError,
     load_scenario,
     parse_scenario,
-    polygon_area_centroid_moment,
     scenario_to_toml,
 )
 from tests.helpers.paths import PAPER
