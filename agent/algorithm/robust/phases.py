@@ -20,8 +20,9 @@
   agreed clock: a gap of ``monitor_gap_s`` in which each robot damps the COM's velocity,
   ``−b ṗ̂_C`` (Step 6's estimate: the load loses its drift), and turns the load up to
   ``pendulum_spin`` (a probe tells a moved COM by the turn), then a *probe* of
-  ``probe_s = T``, the push's common force ``+f`` for ``T/4``, ``−f`` for ``T/2`` and ``+f`` for ``T/4``: the COM's velocity and place come back to where
-  they were, after a swing of ``n f T²/16m``; every other probe swings the other way. A robot
+  ``probe_s = T``, the push's common force ``+f`` for ``T/4``, ``−f`` for ``T/2`` and ``+f``
+  for ``T/4``: the COM's velocity and place come back to where they were, after a swing of
+  ``n f T²/16m``; every other probe swings the other way. A robot
   whose probe finds the load no longer the one estimated (:mod:`agent.algorithm.robust.
   load_change`) is ready to leave ``done``, and the team restarts at ``inertia`` at an agreed
   tick (:mod:`agent.algorithm.coordination`).
