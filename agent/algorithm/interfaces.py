@@ -50,6 +50,12 @@ class OwnEstimates(Protocol):
         """``Ĵ`` (Step 4)."""
         ...
 
+    @property
+    def friction_torque(self) -> tuple[float, float] | None:
+        """``(τ̂_c, σ)``: the floor's friction torque about the COM while the load turns, and
+        its standard deviation (N m; ``None``: not estimated)."""
+        ...
+
     def settled(self, phase: Phase) -> bool:
         """Whether the estimates that ``phase`` is for have settled (excite: Steps 1–3 and
         ``w``; inertia: ``Ĵ``; push: ``z_C`` and ``m̂``)."""
@@ -89,6 +95,14 @@ class Schedule(Protocol):
 
     def mean_push_sign(self, first: int, last: int) -> float:
         """The mean sign of the common force over ticks ``first..last − 1``."""
+        ...
+
+    def swinging(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are in the push's stage for Step 5."""
+        ...
+
+    def translating(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are in the push's stage for Step 7."""
         ...
 
     def mean_push_damping(self, first: int, last: int) -> Vec2:

@@ -98,6 +98,9 @@ class PhaseMachine:
         """What this robot added to the common push during each tick (robust ``push_damping``)."""
         self.moment_used: float | None = None
         """The ``Ĵ`` the push force was sized with (Steps 5 and 7 use it too)."""
+        self.friction_used = 0.0
+        """The floor's friction torque ``τ̂_c`` (N m) when the push began (0: none estimated):
+        a family may keep the load turning against it (:meth:`_pushing`)."""
         self.push: Vec2 = (0.0, 0.0)
         """The common force ``f`` of the push phase (eq. 17), before its sign."""
         self.push_flip_ticks = round(tuning.push_flip_s / self.dt)
@@ -159,6 +162,8 @@ class PhaseMachine:
             self.inertia_torque = self.spin_sign * self.inertia_gain * w
         elif phase == Phase.PUSH:
             self.moment_used = own.moment
+            friction = own.friction_torque
+            self.friction_used = max(friction[0], 0.0) if friction is not None else 0.0
             magnitude = self._push_magnitude(self.moment_used)
             self.push = _unit(self.tuning.push_direction, min(magnitude, self.tuning.max_force))
         self._begin(phase)
@@ -248,6 +253,16 @@ class PhaseMachine:
         if period <= 0 or since < period // 2:
             return first
         return -first if (since - period // 2) // period % 2 == 0 else first
+
+    def swinging(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are all in the push's stage for Step 5 (the load
+        swinging about its COM as it turns): the whole push, unless a family stages it."""
+        return True
+
+    def translating(self, first: int, last: int) -> bool:
+        """Whether ticks ``first..last − 1`` are all in the push's stage for Step 7: the whole
+        push, unless a family stages it."""
+        return True
 
     def mean_push_damping(self, first: int, last: int) -> Vec2:
         """The mean of what each robot added to the common force over ticks ``first..last − 1``

@@ -80,6 +80,9 @@ class EstimationPipeline:
         self.omega: float | None = None
         """``ω`` (Step 3), measured or carried over."""
         self.measured: int | None = None
+        self.swung = False
+        """Whether the push's stage for Step 5 is over (a family that stages the push: its
+        ``ẑ_C`` is then as good as it gets, and counts as settled, with its uncertainty)."""
         """The last instant whose ω was measured (Steps 4–7 use only those)."""
         self.zdot: dict[int, Vec2] = {}
         """``ż_ij`` at the estimation instant, by neighbour."""
@@ -123,6 +126,11 @@ class EstimationPipeline:
         """``m̂`` (Step 7)."""
         return None if self.mass_estimator is None else self.mass_estimator.estimate
 
+    @property
+    def friction_torque(self) -> tuple[float, float] | None:
+        """``(τ̂_c, σ)``: the floor's friction torque (``None``: the family estimates none)."""
+        return None
+
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C`` after the rotation ``alpha`` since the push began (Step 5)."""
         return self.com.com_offset(alpha) if self.com is not None else None
@@ -135,7 +143,7 @@ class EstimationPipeline:
         if phase == Phase.INERTIA:
             return s.moment.settled
         if phase == Phase.PUSH:
-            return s.com_offset.settled and s.mass.settled
+            return (s.com_offset.settled or self.swung) and s.mass.settled
         return False
 
     # ---------------------------------------------------------------- one instant
@@ -243,6 +251,8 @@ class EstimationPipeline:
         # The regressions hold only while the common force acts, over the whole interval.
         pushing = prev is not None and prev >= k_push and schedule.phase_at(e - 1) == Phase.PUSH
         if not self.com.started:
+            if not schedule.swinging(e, e + 1):
+                return
             self.push_angle = self.angle
             self.observer = ComObserver(
                 self.n, schedule.moment_used, schedule.push, self.tuning.observer_gain, omega
@@ -252,13 +262,15 @@ class EstimationPipeline:
         alpha = self.angle - self.push_angle
         sign = schedule.mean_push_sign(prev, e) if pushing else 0.0
         added = schedule.mean_push_damping(prev, e) if pushing else (0.0, 0.0)
-        if pushing:
+        swinging = pushing and schedule.swinging(prev, e)
+        self.swung = self.swung or (pushing and not swinging)
+        if swinging:
             self.observer.update(omega, sign, span)
             self._update_com(alpha, sign, span, added)
         ref_offset = self.com.estimate
         if ref_offset is None:
             return
-        if pushing:
+        if swinging:
             # An offset (perhaps small) is judged against a tenth of the load's size √(w/n).
             self.settle.com_offset.update(
                 ref_offset, e, self._std(self.com), 0.1 * math.sqrt(self.mean_square_offset)
@@ -273,6 +285,8 @@ class EstimationPipeline:
         if v_i is None:
             return
         self.com_velocity = com_velocity(v_i, omega, offset)  # Step 6, eq. (7)
+        if pushing and not schedule.translating(prev, e):
+            return
         if not pushing:
             self._once_pushed(e, prev, span, schedule)
             return
@@ -299,6 +313,7 @@ class EstimationPipeline:
 
     def _forget_load(self) -> None:
         """Drop Steps 4–7's estimates and settling."""
+        self.swung = False
         self.com = self.observer = self.mass_estimator = None
         self.com_velocity = None
         self.changed = False

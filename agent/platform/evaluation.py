@@ -35,11 +35,14 @@ ERROR_KEYS = (
     "com_offset_m",
     "com_observer_m",
     "omega_rad_s",
+    "friction_torque_nm",
+    "coulomb",
 )
 """The errors of :func:`robot_errors`: ``mass_rel`` and ``moment_rel`` are relative
 (``|m̂ − m| / m``, a fraction, not a percentage), the ``_m`` keys Euclidean distances in
-metres, ``omega_rad_s`` is ``|ω̂ − ω|``. The first five are those the project's accuracy
-aims bound."""
+metres, ``omega_rad_s`` is ``|ω̂ − ω|``, ``friction_torque_nm`` ``|τ̂_c − μ m g c|`` (N m, the
+floor's friction torque on a spin: :attr:`~agent.platform.protocol.Truth.coulomb_torque`) and
+``coulomb`` ``|μ̂ − μ|``. The first five are those the project's accuracy aims bound."""
 
 
 class InPhase(Protocol):
@@ -78,6 +81,10 @@ def _rel(estimate: float | None, truth: float) -> float | None:
     return None if estimate is None else _known(abs(estimate - truth) / abs(truth))
 
 
+def _abs(estimate: float | None, truth: float) -> float | None:
+    return None if estimate is None else _known(abs(estimate - truth))
+
+
 def _dist(estimate: Sequence[float] | None, truth: Sequence[float]) -> float | None:
     return None if estimate is None else _known(math.dist(estimate, truth))
 
@@ -112,6 +119,8 @@ def robot_errors(
         "com_offset_m": _dist(est.com_offset, truth.com_offset),
         "com_observer_m": _dist(est.com_observer, truth.com_offset),
         "omega_rad_s": None if est.omega is None else _known(abs(est.omega - truth.omega)),
+        "friction_torque_nm": _abs(est.friction_torque, truth.coulomb_torque),
+        "coulomb": _abs(est.coulomb, truth.ground_coulomb),
     }
 
 

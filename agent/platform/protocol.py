@@ -153,6 +153,10 @@ class Estimates:
     ``relative_positions_cov[j]`` are covariances ``(xx, xy, yy)`` (m²) of those vectors.
     ``drive_gain`` is the robot's estimate of its own drive's gain (applied over commanded
     force, :mod:`agent.algorithm.robust.drive_gain`), ``drive_gain_std`` its standard deviation.
+    ``friction_torque`` (N m) is the floor's friction torque about the COM while the load turns
+    and ``coulomb`` its kinetic friction coefficient ``μ`` (the force ``−μ m g`` against the COM's
+    motion while the load translates), each with its standard deviation (docs/estimator.md,
+    "Friction").
 
     ``load_changes`` counts the team's restarts at Step 4 for a changed load and ``rejoins`` its
     new beginnings from Step 1 after a halt (:mod:`agent.algorithm.coordination`);
@@ -186,6 +190,10 @@ class Estimates:
     load_changes: int = 0
     change_score: float | None = None
     rejoins: int = 0
+    friction_torque: float | None = None
+    friction_torque_std: float | None = None
+    coulomb: float | None = None
+    coulomb_std: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -260,6 +268,12 @@ class Truth:
     ended at ``tick`` (N; zero at tick 0 and without friction)."""
     friction_torque: float = 0.0
     """Its torque about the COM, averaged likewise (N m)."""
+
+    @property
+    def coulomb_torque(self) -> float:
+        """``τ_c = μ m g c`` (N m): the floor's Coulomb friction torque on a spin about the COM,
+        what the robust estimators' ``friction_torque`` estimates."""
+        return self.ground_coulomb * self.mass * GRAVITY * self.friction_radius
 
     @property
     def centroid(self) -> Vec2:
@@ -517,7 +531,7 @@ class DecodeError(ValueError):
 _MEASUREMENT = _struct.Struct("<Hqd4d")
 _COMMAND = _struct.Struct("<Hq2d")
 _CLOCK = _struct.Struct("<qd")
-_ESTIMATES = _struct.Struct("<HqBqHBBBBHH")
+_ESTIMATES = _struct.Struct("<HqBqIBBBBHH")
 """robot, tick, phase, phase_since, which optional values follow (bit per
 :data:`_OPTIONAL_ESTIMATES` entry), how many relative positions, their covariances,
 started and settled steps follow them, then the load changes and the rejoins."""
@@ -540,6 +554,10 @@ _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("drive_gain", 1),
     ("drive_gain_std", 1),
     ("change_score", 1),
+    ("friction_torque", 1),
+    ("friction_torque_std", 1),
+    ("coulomb", 1),
+    ("coulomb_std", 1),
 )
 """The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
@@ -821,7 +839,14 @@ def _estimates(m: Estimates) -> None:
         _covariance("estimates.relative_positions_cov", cov)
     if m.contact_to_com_cov is not None:
         _covariance("estimates.contact_to_com_cov", m.contact_to_com_cov)
-    for name in ("mass_std", "moment_std", "drive_gain_std", "change_score"):
+    for name in (
+        "mass_std",
+        "moment_std",
+        "drive_gain_std",
+        "change_score",
+        "friction_torque_std",
+        "coulomb_std",
+    ):
         value = getattr(m, name)
         if value is not None:
             _within(f"estimates.{name}", value, 0.0, _math.inf)

@@ -21,6 +21,13 @@ exact for a uniform turn by :func:`~agent.platform.geometry.arc_factor`) and
 ``∫∫φ ≈ h ∫φ(t) + h² (φ₀/3 + φ₁/6)``. ``c`` is determined once the load has turned enough
 for ``Ψ`` to span the plane (Prop. V.1: ω ≠ 0, f ≠ 0).
 
+On a real floor the load turns against a friction torque ``−τ_c sgn ω``, and the team adds a
+constant torque of its own that keeps it turning (:mod:`agent.algorithm.robust.phases`): while
+the load turns one way (``s_ω``) both are a constant ``d`` in ``θ̈``, so a fifth column
+``Σ_ω = ∫∫ s_ω`` with the unknown ``d`` takes them up (0 on a frictionless floor without that
+torque). The torque of friction's force about the COM vanishes to first order in
+``‖ṗ_C‖ / (|ω| r)`` (docs/estimator.md, "Friction"), which the experiment keeps small.
+
 Uncertainty: the fit's ``σ̂² M⁻¹`` for ``c``, scaled for the angle's correlated errors as in
 :mod:`agent.algorithm.robust.inertia_fit`
 (:data:`~agent.algorithm.robust.least_squares.CORRELATION_TIME`). It does not include the error
@@ -39,7 +46,8 @@ class ComFit(RunFit):
     def __init__(
         self, n: int, moment: float, force: Vec2, forgetting: float = 1.0, lag: float = 0.0
     ):
-        super().__init__(4, forgetting)  # rows [1, t − t₀, Ψ_x, Ψ_y] (θ₀, ω₀, c_x, c_y) = α
+        # rows [1, t − t₀, Ψ_x, Ψ_y, Σ_ω] (θ₀, ω₀, c_x, c_y, d) = α
+        super().__init__(5, forgetting)
         k = n / moment
         self.k = k
         self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
@@ -50,15 +58,27 @@ class ComFit(RunFit):
         """``∫φ`` since the first sample."""
         self._twice: Vec2 = (0.0, 0.0)
         """``Ψ = ∫∫φ`` since the first sample."""
+        self._spin_once = 0.0
+        self._spin_twice = 0.0
+        """``Σ_ω = ∫∫ sgn ω`` since the first sample."""
 
     def regressor(self, alpha: float) -> Vec2:
         """``φ = (n/J) R(−α) Qᵀ f``."""
         return rotate(self.base, -alpha)
 
-    def update(self, alpha: float, sign: float, dt: float, *, added: Vec2 = (0.0, 0.0)) -> None:
+    def update(
+        self,
+        alpha: float,
+        sign: float,
+        dt: float,
+        *,
+        added: Vec2 = (0.0, 0.0),
+        spin: float = 1.0,
+    ) -> None:
         """Feed the rotation ``α`` since the push began, at the end of an interval ``dt``
-        during which the team pushed with the mean sign ``sign`` and each robot added the
-        mean force ``added`` (the first call, at the push's first instant, starts)."""
+        during which the team pushed with the mean sign ``sign``, each robot added the
+        mean force ``added`` and the load turned the way ``spin`` (the first call, at the
+        push's first instant, starts)."""
         k = self.k
         extra = (k * added[1], -k * added[0])  # (n/J) Qᵀ a
         if self.started:
@@ -75,6 +95,8 @@ class ComFit(RunFit):
                 twice[1] + dt * once[1] + dd * (p0[1] / 3.0 + phi[1] / 6.0),
             )
             self._once = (once[0] + h * (p0[0] + phi[0]), once[1] + h * (p0[1] + phi[1]))
+            self._spin_twice += self._spin_once * dt + 0.5 * spin * dd
+            self._spin_once += spin * dt
             self.t += dt
         self.started = True
         self._alpha = alpha
@@ -88,6 +110,7 @@ class ComFit(RunFit):
                 self.t,
                 sx - lag * ox + lag2 * px + lagged * ex,
                 sy - lag * oy + lag2 * py + lagged * ey,
+                self._spin_twice,
             ),
             alpha,
         )

@@ -24,6 +24,16 @@ the load's rotation since ``t₀``. Where eq. (7)'s ``ṗ_C = ṗ_Ci − ω o⊥
 times the offset (centimetres per second), the displacement's error is the velocity noise's
 random walk.
 
+On a real floor the load slides or rolls against Coulomb friction at its supports. The team
+measures the mass while the load translates without turning (the push's *translation* stage,
+:mod:`agent.algorithm.robust.phases`): every support then moves with the COM, so friction's
+force is exactly ``−μ m g v̂_C`` (``v̂_C`` the COM's direction of motion, whatever the supports'
+layout) and its torque about the COM is zero. A fourth column ``−C(t)``,
+``C = ∫∫ v̂_C``, with the unknown ``μ g`` takes it up (the COM's velocity ``ṗ_C`` is Step 6's,
+taken to change linearly over each interval, so that a reversal within one turns ``v̂_C``
+where the velocity passes closest to zero: :func:`_directions`): ``μ̂`` is published (0 on a
+frictionless floor, within its uncertainty).
+
 Uncertainty: the fit's ``σ̂² M⁻¹`` as it is, every row counted (over 40 runs of the paper's
 scenario at 1 cm/s, seeds 0–39, the rows counted one per 0.2 s gave standard deviations eight
 times the errors'); ``std(m̂) = std(1/m) m̂²``. ``heft bench calibrate correlation-time``
@@ -39,8 +49,17 @@ commanded force for the applied one; the pipeline scales its ``m`` by the drives
 
 from __future__ import annotations
 
+import math
+
 from agent.algorithm.robust.least_squares import ReciprocalFit
 from agent.platform.geometry import Vec2, rotate
+from agent.platform.protocol import GRAVITY
+
+TURNING = 0.9
+"""``v̂₀ · v̂₁`` below which an interval's direction of motion is integrated over
+:data:`PIECES` pieces of it (the velocity passed near zero, or turned fast), not as a
+trapezoid."""
+PIECES = 8
 
 
 class MassFit(ReciprocalFit):
@@ -50,7 +69,8 @@ class MassFit(ReciprocalFit):
     correlation_time = 0.0  # each row counts: measured (below)
 
     def __init__(self, n: int, force: Vec2, forgetting: float = 1.0, lag: float = 0.0):
-        super().__init__(3, forgetting)  # rows [t, 0, n f_x (S − τ_d Σ)], [0, t, n f_y (…)]
+        # rows [t, 0, n f_x (S − τ_d Σ), −C_x], [0, t, n f_y (…), −C_y] (v₀ₓ, v₀ᵧ, 1/m, μ g)
+        super().__init__(4, forgetting)
         self.n = n
         self.total_force = (n * force[0], n * force[1])
         self._added_once: Vec2 = (0.0, 0.0)
@@ -66,6 +86,10 @@ class MassFit(ReciprocalFit):
         self._travel: Vec2 = (0.0, 0.0)
         """``∫ṗ_Ci dt`` since the first sample."""
         self._angle0 = 0.0
+        self._direction: Vec2 = (0.0, 0.0)
+        self._sliding_once: Vec2 = (0.0, 0.0)
+        self._sliding_twice: Vec2 = (0.0, 0.0)
+        """``C = ∫∫ v̂_C`` since the first sample."""
 
     def update(
         self,
@@ -76,15 +100,23 @@ class MassFit(ReciprocalFit):
         dt: float,
         *,
         added: Vec2 = (0.0, 0.0),
+        com_velocity: Vec2 | None = None,
     ) -> None:
-        """Feed the robot's contact velocity ``ṗ_Ci``, the offset ``o = p_Ci − p_C`` and the
-        load's rotation ``angle`` at the end of an interval ``dt`` of pushing with the mean
-        sign ``sign`` and the mean force ``added`` each robot added to it (the first call
-        starts)."""
+        """Feed the robot's contact velocity ``ṗ_Ci``, the offset ``o = p_Ci − p_C``, the
+        load's rotation ``angle`` and the COM's velocity ``com_velocity`` (Step 6) at the end
+        of an interval ``dt`` of pushing with the mean sign ``sign`` and the mean force
+        ``added`` each robot added to it (the first call starts)."""
+        moving = com_velocity or (0.0, 0.0)
         if not self.started:
             self.started = True
             self._velocity, self._angle0 = velocity, angle
+            self._direction = moving
             return
+        once, twice = _directions(self._direction, moving, dt)
+        (cx, cy), (qx, qy) = self._sliding_once, self._sliding_twice
+        self._sliding_twice = (qx + dt * cx + twice[0], qy + dt * cy + twice[1])
+        self._sliding_once = (cx + once[0], cy + once[1])
+        self._direction = moving
         v0 = self._velocity
         travel = self._travel
         self._travel = (
@@ -109,6 +141,48 @@ class MassFit(ReciprocalFit):
         (ox, oy), (tx, ty) = self._added_once, self._added_twice
         ax = self.n * (tx - lag * ox + lag * lag * added[0])
         ay = self.n * (ty - lag * oy + lag * lag * added[1])
-        self.fit.add((t, 0.0, pushed * fx + ax), dx)
-        self.fit.add((0.0, t, pushed * fy + ay), dy)
+        slid_x, slid_y = self._sliding_twice
+        self.fit.add((t, 0.0, pushed * fx + ax, -slid_x), dx)
+        self.fit.add((0.0, t, pushed * fy + ay, -slid_y), dy)
         self._solve()
+
+    @property
+    def coulomb(self) -> tuple[float, float] | None:
+        """``(μ̂, σ)``: the floor's kinetic friction coefficient ``p₄ / g`` and its standard
+        deviation (``None`` before the fit)."""
+        fit = self._solution
+        if fit is None:
+            return None
+        gradient = (0.0, 0.0, 0.0, 1.0)
+        std = math.sqrt(fit.variance_of(gradient, self._scale))
+        return fit.estimate[3] / GRAVITY, std / GRAVITY
+
+
+def _unit(v: Vec2) -> Vec2:
+    """``v / ‖v‖`` (``(0, 0)`` for ``v = 0``)."""
+    speed = math.hypot(v[0], v[1])
+    return (0.0, 0.0) if speed == 0.0 else (v[0] / speed, v[1] / speed)
+
+
+def _directions(before: Vec2, after: Vec2, dt: float) -> tuple[Vec2, Vec2]:
+    """``(∫ v̂ ds, ∫ (dt − s) v̂ ds)`` over an interval ``dt`` in which the velocity goes
+    linearly from ``before`` to ``after``: the trapezoid's while ``v̂`` barely turns, else the
+    midpoints of :data:`PIECES` pieces."""
+    u0, u1 = _unit(before), _unit(after)
+    if u0[0] * u1[0] + u0[1] * u1[1] >= TURNING:
+        return (
+            (0.5 * dt * (u0[0] + u1[0]), 0.5 * dt * (u0[1] + u1[1])),
+            (dt * dt * (u0[0] / 3.0 + u1[0] / 6.0), dt * dt * (u0[1] / 3.0 + u1[1] / 6.0)),
+        )
+    h = dt / PIECES
+    ox = oy = tx = ty = 0.0
+    for j in range(PIECES):
+        s = (j + 0.5) / PIECES
+        ux, uy = _unit(
+            (before[0] + s * (after[0] - before[0]), before[1] + s * (after[1] - before[1]))
+        )
+        ox += h * ux
+        oy += h * uy
+        tx += h * (dt - s * dt) * ux
+        ty += h * (dt - s * dt) * uy
+    return (ox, oy), (tx, ty)

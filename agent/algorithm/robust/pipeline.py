@@ -188,14 +188,33 @@ class RobustPipeline(EstimationPipeline):
         return InertiaFit(self.forgetting, self._torque_scale_std())
 
     def _update_inertia(self, torque: float, span: float) -> None:
-        self.inertia.update(self.angle, torque, span)  # the rotation angle, not ω
+        # the rotation angle, not ω; friction's torque against the turn
+        self.inertia.update(self.angle, torque, span, spin=self._spin)
+
+    @property
+    def _spin(self) -> float:
+        """``sgn ω``: the way the load turns now."""
+        return math.copysign(1.0, self.omega or 1.0)
+
+    @property
+    def friction_torque(self) -> tuple[float, float] | None:
+        """``(τ̂_c, σ)`` (N m): the floor's friction torque about the COM while the load turns
+        (Step 4's fit, :mod:`agent.algorithm.robust.inertia_fit`), scaled like ``Ĵ`` by the
+        drives' gains, and its standard deviation (with the gains')."""
+        found = None if self.inertia is None else self.inertia.friction_torque
+        if found is None:
+            return None
+        torque, std = found
+        gain = self._torque_gain
+        team_gain_std = (self.drive.std or 0.0) / math.sqrt(self.n)
+        return torque * gain, math.hypot(std * gain, torque * gain * team_gain_std)
 
     def _new_com(self, schedule: ProbeSchedule) -> ComFit:
         self.lag = self.inertia.lag  # the drives' lag, which Step 4's fit found
         return ComFit(self.n, schedule.moment_used, schedule.push, self.forgetting, self.lag)
 
     def _update_com(self, alpha: float, sign: float, span: float, added: Vec2) -> None:
-        self.com.update(alpha, sign, span, added=added)
+        self.com.update(alpha, sign, span, added=added, spin=self._spin)
 
     def _new_mass(self, schedule: ProbeSchedule) -> MassFit:
         return MassFit(self.n, schedule.push, self.forgetting, self.lag)
@@ -203,7 +222,22 @@ class RobustPipeline(EstimationPipeline):
     def _update_mass(
         self, velocity: Vec2, offset: Vec2, sign: float, span: float, added: Vec2
     ) -> None:
-        self.mass_estimator.update(velocity, offset, self.angle, sign, span, added=added)
+        self.mass_estimator.update(
+            velocity,
+            offset,
+            self.angle,
+            sign,
+            span,
+            added=added,
+            com_velocity=self.com_velocity,
+        )
+
+    @property
+    def coulomb(self) -> tuple[float, float] | None:
+        """``(μ̂, σ)``: the floor's kinetic friction coefficient (Step 7's fit while the load
+        translates, :mod:`agent.algorithm.robust.mass_fit`)."""
+        fit = self.mass_estimator
+        return None if fit is None else fit.coulomb
 
     def _forget_load(self) -> None:
         super()._forget_load()
@@ -322,6 +356,13 @@ class RobustPipeline(EstimationPipeline):
             else moment_std * math.sqrt(PUBLISHED_VARIANCE["moment"]),
             "mass_std": mass_std,
         }
+        for key, found in (
+            ("friction_torque", self.friction_torque),
+            ("coulomb", self.coulomb),
+        ):
+            if found is not None:
+                scale = math.sqrt(PUBLISHED_VARIANCE.get(key, 1.0))
+                out[key], out[key + "_std"] = found[0], found[1] * scale
         com_cov = self.com.covariance if self.com is not None else None
         if contact_to_com is not None and edges and com_cov is not None:
             alpha = self.angle - self.push_angle

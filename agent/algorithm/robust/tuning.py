@@ -23,10 +23,36 @@ class RobustTuning:
     turn the load had, by half as much as speeding up first: for compact, light loads, whose
     turn would leave the floor; a slower turn gives Step 1's direction filters less signal.
     0: speed up first."""
+    inertia_brake_level: float = bounded(0.5, 0, 1)
+    """Step 4 brakes with this fraction of the torque it speeds up with: on a real floor,
+    whose friction torque brakes the turn all the while, equal levels would stop the load
+    within a few flips; below 1 the turn keeps up (a frictionless load's turn grows by
+    ``(1 − this) k w T / 2J`` a flip). 1: the paper's symmetric torque."""
     push_force: float = bounded(2.0, 0, 1000, "N", open_low=True)
     """N: every robot pushes with exactly this (at most ``max_force``): the robots' Ĵ differ by
     their noise, and eq. (17)'s ``f̄_y Ĵ/n`` would make their forces differ too, where Steps 5
     and 7 need one common force."""
+    spin_up_s: float = bounded(1.5, 0, 60, "s")
+    """s: the push begins by turning the load up to ``pendulum_spin`` for this long (each robot
+    adds the torque ``τ̂_c + Ĵ (ω* − ω̂) / spin_up_s``, no net force), so that the swing of
+    Step 5's stage is small against the supports' speed about the COM."""
+    pendulum_spin: float = bounded(1.2, 0, 10, "rad/s", open_low=True)
+    """rad/s: ``ω*``, the turn the load is brought up to for Step 5's stage (within the floor's
+    ``|ω|``)."""
+    pendulum_s: float = bounded(6.0, 0, 600, "s", min_ticks=10)
+    """s: the push's first stage, Step 5's, in which the load swings about its COM as it turns
+    (the torque ``s_ω τ̂_c`` keeps it turning against the floor's friction)."""
+    pendulum_flip_s: float = bounded(1.0, 0, 60, "s", min_ticks=2)
+    """s: the push's reversal period ``T`` in Step 5's stage (``push_flip_s`` is Step 7's):
+    shorter than Step 7's, so that the COM's speed (``n f T / 2m``) stays small against the
+    supports' speed about it, ``|ω| r``, where the floor's friction is a torque alone."""
+    translate_brake_s: float = bounded(1.5, 0, 60, "s", min_ticks=1)
+    """s: then every robot brakes its contact (``−b ṗ_Ci``, ``brake_gain``) for this long: the
+    load stops turning before it is pushed in translation (Step 7's stage)."""
+    turn_damping: float = bounded(4.0, 0, 1000, "N s/m")
+    """N s/m: in Step 7's stage each robot adds ``−b ω̂ z_i⊥`` (torque ``−b ω̂ w``, no net
+    force): the push's torque about the COM then turns the load little, so that every support
+    moves with the COM and friction's force is ``−μ m g v̂_C`` exactly."""
     push_damping: float = bounded(2.0, 0, 1000, "N s/m")
     """N s/m: each robot adds ``−b ṗ̂_G`` to the push (the centroid's velocity, which every
     robot estimates alike from Step 2): the COM's speed then stays within about ``f / b`` and a

@@ -24,7 +24,7 @@ from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
 from agent.platform.config import ConfigError, from_table, to_toml
 from agent.platform.geometry import rotate
-from agent.platform.protocol import Phase
+from agent.platform.protocol import GRAVITY, Phase
 
 DT = 0.01
 
@@ -130,14 +130,17 @@ def test_arc_fit_under_noise_beats_the_paper_and_knows_its_error() -> None:
 
 
 # ------------------------------------------------------------------------------ Step 4
-def _spin(moment: float, seconds: float, noise: float = 0.0, seed: int = 0):
-    """A load spun by ``±τ`` in turns of 0.5 s: ``(angle, torque)`` samples."""
+def _spin(moment: float, seconds: float, noise: float = 0.0, seed: int = 0, friction: float = 0.0):
+    """A load spun by ``±τ`` in turns of 0.5 s against a floor's friction torque
+    ``−friction sgn ω`` (it keeps turning one way): ``(angle, torque)`` samples."""
     rng = np.random.default_rng(seed)
     theta, omega, out = 0.3, 0.5, [(0.3, 0.0)]
     for k in range(round(seconds / DT)):
         torque = 7.0 if (k // 50) % 2 == 0 else -7.0
-        theta += omega * DT + 0.5 * torque / moment * DT * DT
-        omega += torque / moment * DT
+        felt = torque - math.copysign(friction, omega)
+        theta += omega * DT + 0.5 * felt / moment * DT * DT
+        omega += felt / moment * DT
+        assert omega > 0.0
         out.append((theta + noise * rng.normal(), torque))
     return out
 
@@ -148,6 +151,20 @@ def test_inertia_fit_is_exact_without_noise() -> None:
     for angle, torque in _spin(12.3795, 2.0):
         fit.update(angle, torque, DT)
     assert fit.estimate == pytest.approx(12.3795, rel=1e-9)
+
+
+def test_inertia_fit_finds_the_floors_friction_torque() -> None:
+    """A friction torque the fit left out would read as a larger ``J`` (it brakes the turn
+    while the torque speeds it up, helps while it brakes): with its column, both are exact."""
+    fit = InertiaFit()
+    for angle, torque in _spin(12.3795, 2.0, friction=1.5):
+        fit.update(angle, torque, DT)
+    assert fit.estimate == pytest.approx(12.3795, rel=1e-9)
+    assert fit.friction_torque[0] == pytest.approx(1.5, rel=1e-9)
+    frictionless = InertiaFit()
+    for angle, torque in _spin(12.3795, 2.0):
+        frictionless.update(angle, torque, DT)
+    assert frictionless.friction_torque[0] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_inertia_fit_std_grows_with_the_angle_noise_and_the_torque_scale() -> None:
@@ -198,9 +215,46 @@ def test_mass_fit_is_exact_without_noise() -> None:
         offset = rotate(offset0, angle)  # p_Ci − p_C
         com_velocity = (v0[0] + n * force[0] / mass * t, v0[1] + n * force[1] / mass * t)
         contact_velocity = (com_velocity[0] - 0.8 * offset[1], com_velocity[1] + 0.8 * offset[0])
-        fit.update(contact_velocity, offset, angle, 1.0, DT)
+        fit.update(contact_velocity, offset, angle, 1.0, DT, com_velocity=com_velocity)
     assert fit.estimate == pytest.approx(mass, rel=1e-4)
     assert fit.std < 1e-3
+
+
+@pytest.mark.parametrize(
+    ("mu", "mass", "push", "tolerance"),
+    [(0.0, 5.0, 4.0, 2e-3), (0.02, 5.0, 4.0, 2e-3), (0.3, 20.0, 25.0, 4e-3)],
+)
+def test_mass_fit_finds_the_floors_coulomb_friction_while_the_load_translates(
+    mu: float, mass: float, push: float, tolerance: float
+) -> None:
+    """A load that translates (no turn) under a reversing push ``±n f`` slides against
+    ``−μ m g v̂_C``: the fit finds ``m`` and ``μ`` (the velocity is taken to change linearly
+    over a tick, which places a reversal within a fraction of one: the larger ``μ``, the more
+    that costs)."""
+    n, force, offset = 4, (0.0, push), (1.2, -0.7)
+    commanded, _ = _reversing_push(8.0, 2.0)
+    fit = MassFit(n, force)
+    velocity, fine = [0.0, 0.1], 100
+    for k, sign in enumerate(commanded):
+        fit.update(
+            tuple(velocity),
+            offset,
+            0.0,
+            commanded[k - 1] if k else 1.0,
+            DT,
+            com_velocity=tuple(velocity),
+        )
+        for _ in range(fine):
+            speed = math.hypot(*velocity)
+            drag = (
+                (0.0, 0.0)
+                if speed == 0
+                else (-mu * GRAVITY * velocity[0] / speed, -mu * GRAVITY * velocity[1] / speed)
+            )
+            velocity[0] += (n * sign * force[0] / mass + drag[0]) * DT / fine
+            velocity[1] += (n * sign * force[1] / mass + drag[1]) * DT / fine
+    assert fit.estimate == pytest.approx(mass, rel=tolerance)
+    assert fit.coulomb[0] == pytest.approx(mu, abs=tolerance * 0.1)
 
 
 def test_every_robust_estimator_has_the_common_shape() -> None:
@@ -299,7 +353,8 @@ class _Own:
 
 def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -> None:
     """Two robots whose ω differ by their noise reverse the torque at the same ticks: speeding
-    up and braking for a flip each, after braking for ``inertia_brake_s`` if it is set."""
+    up and braking (with ``inertia_brake_level`` of the torque) for a flip each, after braking
+    for ``inertia_brake_s`` if it is set."""
     schedules = []
     for omega, brake in ((0.49, 0.0), (0.51, 0.0), (0.5, 0.25)):
         robust = RobustTuning(inertia_flip_s=0.5, inertia_brake_s=brake)
@@ -313,10 +368,11 @@ def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -
         for k in range(100, 300):
             machine.force(k, own, (0.0, 0.0))
         torques = [machine._torque[k] for k in range(100, 300)]
+        braking = -2.8 * robust.inertia_brake_level
         if brake:
             torques = torques[25:]  # braking first for 0.25 s
-            assert machine._torque[100] == -2.8 and machine._torque[124] == -2.8
-        assert torques[:50] == [2.8] * 50 and torques[50:100] == [-2.8] * 50
+            assert machine._torque[100] == braking and machine._torque[124] == braking
+        assert torques[:50] == [2.8] * 50 and torques[50:100] == [braking] * 50
         schedules.append(torques[:175])
     assert schedules[0] == schedules[1] == schedules[2]
 
@@ -353,7 +409,8 @@ def test_mass_fit_with_a_reversing_push_and_lagging_drives(lag: float) -> None:
         offset = rotate(offset0, angle)
         contact = (velocity[0] - 0.8 * offset[1], velocity[1] + 0.8 * offset[0])
         for fit in fits.values():
-            fit.update(contact, offset, angle, commanded[k - 1] if k else 1.0, DT)
+            before = commanded[k - 1] if k else 1.0
+            fit.update(contact, offset, angle, before, DT, com_velocity=tuple(velocity))
         velocity[1] += n * force[1] * level / mass * DT
         travel = max(travel, abs(velocity[1] - v0[1]))
     assert travel < n * force[1] * 1.0 / mass  # the speed swings by at most n f T / 2m each way
@@ -396,7 +453,10 @@ def test_mass_and_com_fits_take_a_damped_push() -> None:
         # ṗ_G = ṗ_C + ω Q z_C, as every robot estimates it from Step 2 (here exactly)
         zc = rotate(c, theta)
         added = (-b * (velocity[0] - omega * zc[1]), -b * (velocity[1] + omega * zc[0]))
-        mass_fit.update(contact, offset, theta, commanded[k - 1] if k else 1.0, DT, added=previous)
+        before = commanded[k - 1] if k else 1.0
+        mass_fit.update(
+            contact, offset, theta, before, DT, added=previous, com_velocity=tuple(velocity)
+        )
         if k:
             com_fit.update(theta, commanded[k - 1], DT, added=previous)
         total = (sign * force[0] + added[0], sign * force[1] + added[1])
