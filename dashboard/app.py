@@ -5,9 +5,9 @@
 ``GET /vendor/uplot.js``    the charting library (and ``uplot.css``), installed from the npm
                             registry into ``dashboard/node_modules`` by ``make`` (no CDN:
                             robots run offline)
-``GET /api/snapshot``       the latest state: per robot phase, m̂, Ĵ, ``contact_to_com``,
-                            ``relative_positions`` and their uncertainties; each link's
-                            health; the truth if known
+``GET /api/snapshot``       the latest state: per robot phase, m̂, Ĵ, ``τ̂_c``, ``μ̂``,
+                            ``contact_to_com``, ``relative_positions`` and their
+                            uncertainties; each link's health; the truth if known
 ``GET /api/summary``        the final table of estimates against truth (404 before)
 ``GET /api/series``         every chart's kept points
 ``POST /api/replay``        steer a replay: ``{"action": "play"|"pause"|"step"|"restart",

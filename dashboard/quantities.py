@@ -7,7 +7,10 @@ robot's estimate (trace ``KEY/ROBOT``, points ``[t, value, half-width]``) and th
 (``KEY/truth``), and puts the estimate, its interval and whether the truth lies inside it in
 the table's rows; the page is sent the declarations in its ``hello`` and builds a chart, a
 value column and an error column for each. A quantity estimated with a standard deviation
-(a friction term, say) is one more line of :data:`SCALARS`.
+is one more line of :data:`SCALARS`: the floor's friction is two, ``τ̂_c`` (the Coulomb
+friction torque on a spin about the COM, judged against the truth's ``μ m g c``) and ``μ̂``
+(the kinetic coefficient, a fraction of the weight), each judged by its absolute error (the
+truth is 0 on a frictionless floor).
 
 The 95 % interval is ``±1.96 σ`` (:func:`~agent.platform.evaluation.scalar_interval`): the
 robust estimators publish standard deviations scaled so that it holds the truth 95 % of the
@@ -31,8 +34,8 @@ class Scalar:
     """The :class:`~agent.platform.protocol.Estimates` field of its standard deviation (same
     unit)."""
     truth: str
-    """The :class:`~agent.platform.protocol.Truth` field it is judged against (a truth without
-    it: not judged)."""
+    """The :class:`~agent.platform.protocol.Truth` field (or property) it is judged against (a
+    truth without it: not judged)."""
     error: str | None
     """Its key among :func:`~agent.platform.evaluation.robot_errors`' (``…_rel``: relative,
     shown in %; else in ``unit``), or None: no error column."""
@@ -42,7 +45,8 @@ class Scalar:
     title: str
     """Its chart's heading."""
     digits: int
-    """Decimals of the estimate and its ``±`` in the table."""
+    """Decimals of the estimate and its ``±`` in the table, and of its error when that is not
+    relative."""
 
     def declaration(self) -> dict:
         """What the page is told of it (in its ``hello``)."""
@@ -60,6 +64,17 @@ class Scalar:
 SCALARS: tuple[Scalar, ...] = (
     Scalar("mass", "mass_std", "mass", "mass_rel", "m̂", "kg", "mass", 4),
     Scalar("moment", "moment_std", "moment", "moment_rel", "Ĵ", "kg m²", "moment of inertia", 4),
+    Scalar(
+        "friction_torque",
+        "friction_torque_std",
+        "coulomb_torque",
+        "friction_torque_nm",
+        "τ̂_c",
+        "N m",
+        "friction torque on a spin",
+        4,
+    ),
+    Scalar("coulomb", "coulomb_std", "ground_coulomb", "coulomb", "μ̂", "", "kinetic friction", 5),
 )
 """Every estimated scalar the page shows, in the order of its charts and columns."""
 

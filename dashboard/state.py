@@ -13,14 +13,15 @@ p_Cj`` (``relative_positions``), ``z_C = p_G − p_C`` (``com_offset``), ``ω`` 
 ``p_C − p_Ci`` (``contact_to_com``).
 
 Chart traces are named ``QUANTITY/ROBOT``: one per scalar of :data:`~dashboard.quantities.
-SCALARS` (``mass/2``, ``moment/2``), ``omega/2``, ``ctc/2`` (``‖p̂_C − p_C2‖``, robot 2's
-distance from its contact to the COM), ``edge/1-2`` (``‖ẑ_12‖`` as robot 1 knows it); the
-truth's are ``mass/truth``, ``moment/truth``, ``omega/truth``, ``ctc/2/truth`` and
-``edge/1-2/truth``. Each point is ``[t, value]``, ``t`` in simulated seconds (tick × period),
-or ``[t, value, h]`` when the robot published an uncertainty of it: ``value ± h`` is its 95 %
-interval (``h = 1.96 σ``; for the norms ``‖v̂‖``, ``σ² = ûᵀ C û`` with ``û = v̂ / ‖v̂‖`` and
-``C`` the vector's covariance, to first order). An uncertainty that is not one (non-finite,
-negative, not a covariance) is dropped: that point has no ``h``.
+SCALARS` (``mass/2``, ``moment/2``, ``friction_torque/2``, ``coulomb/2``), ``omega/2``,
+``ctc/2`` (``‖p̂_C − p_C2‖``, robot 2's distance from its contact to the COM), ``edge/1-2``
+(``‖ẑ_12‖`` as robot 1 knows it); the truth's are ``mass/truth``, ``moment/truth`` (and
+likewise each scalar's), ``omega/truth``, ``ctc/2/truth`` and ``edge/1-2/truth``. Each point
+is ``[t, value]``, ``t`` in simulated seconds (tick × period), or ``[t, value, h]`` when the
+robot published an uncertainty of it: ``value ± h`` is its 95 % interval (``h = 1.96 σ``; for
+the norms ``‖v̂‖``, ``σ² = ûᵀ C û`` with ``û = v̂ / ‖v̂‖`` and ``C`` the vector's covariance,
+to first order). An uncertainty that is not one (non-finite, negative, not a covariance) is
+dropped: that point has no ``h``.
 """
 
 from __future__ import annotations
@@ -387,9 +388,11 @@ class TeamState:
 
     # ------------------------------------------------------------------ the table
     def table(self, truth: Truth | None, robots: dict[int, Estimates], final: bool) -> dict:
-        """Each robot's estimates against ``truth`` (when known): m̂, Ĵ, ``p_C − p_Ci``,
+        """Each robot's estimates against ``truth`` (when known): each of
+        :data:`~dashboard.quantities.SCALARS` (m̂, Ĵ, ``τ̂_c``, ``μ̂``), ``p_C − p_Ci``,
         ``ẑ_C`` and their errors (:func:`~agent.platform.evaluation.robot_errors`: relative,
-        metres and rad/s, ``relative_positions_m`` over the neighbours its estimates name),
+        metres, rad/s, N m and μ's, ``relative_positions_m`` over the neighbours its estimates
+        name),
         the 95 % intervals of each of :data:`~dashboard.quantities.SCALARS`, of
         ``p_C − p_Ci`` and of the ``ẑ_ij`` as ``[half-width, truth inside]`` (the inside
         None without the truth; both None without an uncertainty:
@@ -481,9 +484,10 @@ class TeamState:
                 self._add(f"edge/{i}-{j}", k, _norm(z), _norm_half(z, covs.get(j)))
 
     def _plot_truth(self, truth: Truth) -> None:
-        """The truth beside the estimates: ``ω``, and the constants m, J (each of
-        :data:`~dashboard.quantities.SCALARS` the truth has), each robot's ``‖p_C − p_Ci‖`` and
-        each edge's ``‖z_ij‖`` as lines (so that a chart's range always holds the truth)."""
+        """The truth beside the estimates: ``ω``, and the constants m, J, ``μ m g c`` and ``μ``
+        (each of :data:`~dashboard.quantities.SCALARS` the truth has), each robot's
+        ``‖p_C − p_Ci‖`` and each edge's ``‖z_ij‖`` as lines (so that a chart's range always
+        holds the truth)."""
         if truth.tick < self.truth_sampled + self._stride():
             return
         self.truth_sampled = k = truth.tick
@@ -729,8 +733,8 @@ class TeamState:
         """The scene as the page draws it (its frames carry it ~20 times a second): what
         :meth:`scene` holds, less what the page does not show (per robot only its phase, tick,
         segments and liveliness; the table's rows without ω, ``ẑ_C`` and ``ẑ_ij``, of their
-        errors those of m̂, Ĵ, ``p_C − p_Ci`` and ``ẑ_ij`` only, and of their intervals those
-        published)."""
+        errors those of :data:`~dashboard.quantities.SCALARS`, ``p_C − p_Ci`` and ``ẑ_ij``
+        only, and of their intervals those published)."""
         scene = self.scene(now)
         scene["robots"] = {
             i: {key: view[key] for key in _PAGE_ROBOT} for i, view in scene["robots"].items()
@@ -748,7 +752,8 @@ class TeamState:
         return scene
 
     def snapshot(self, now: float) -> dict:
-        """``GET /api/snapshot``: the scene (per robot: phase, m̂, Ĵ, ``contact_to_com``,
+        """``GET /api/snapshot``: the scene (per robot: phase, m̂, Ĵ, ``τ̂_c``, ``μ̂``,
+        ``contact_to_com``,
         ``relative_positions`` and their uncertainties; the links' health; the truth when
         known)."""
         return self.scene(now)

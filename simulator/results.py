@@ -23,16 +23,22 @@ The times at which the *team* switched force regime (``excite``, ``inertia``, ``
 ``done``) are given beside them, under ``team_phases``.
 
 Uncertainty (the robust estimators publish it): each robot's ``mass_std`` and ``moment_std``,
-and the covariances ``[xx, xy, yy]`` of ``contact_to_com`` and of each ``relative_positions``
-entry, as published; and under ``intervals`` (:func:`intervals`) the 95 % intervals' half-widths
-and whether the truth fell inside each: ``|error| ≤ 1.96 σ`` for m and J, the 95 % ellipse
+``friction_torque_std`` and ``coulomb_std``, and the covariances ``[xx, xy, yy]`` of
+``contact_to_com`` and of each ``relative_positions`` entry, as published; and under
+``intervals`` (:func:`intervals`) the 95 % intervals' half-widths and whether the truth fell
+inside each: ``|error| ≤ 1.96 σ`` for a scalar (m, J, ``τ̂_c``, ``μ̂``), the 95 % ellipse
 ``eᵀ C⁻¹ e ≤ 5.99`` for a vector (its half-width given along its least certain axis).
+
+Friction (the robust estimators estimate it): ``friction_torque`` ``τ̂_c`` (N m) is the floor's
+Coulomb friction torque on a spin about the COM, judged against the truth's ``μ m g c``
+(:attr:`~agent.platform.protocol.Truth.coulomb_torque`, ``truth.ground.coulomb_torque``), and
+``coulomb`` ``μ̂`` its kinetic coefficient, judged against ``truth.ground.coulomb``.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from agent.platform import evaluation
@@ -49,6 +55,9 @@ if TYPE_CHECKING:
     from simulator.inprocess import RunOutcome
     from simulator.scenario import Scenario
 
+FRICTION_KEYS = ("friction_torque", "friction_torque_std", "coulomb", "coulomb_std")
+"""The floor's friction as a robot estimates it (:class:`~agent.platform.protocol.Estimates`):
+``τ̂_c`` (N m) and ``μ̂`` with their standard deviations."""
 STEPS = tuple(range(1, 8))
 """The paper's seven steps."""
 STEP_NAMES = {
@@ -107,7 +116,8 @@ def _truth_dict(outcome: RunOutcome) -> dict[str, Any]:
 def ground_dict(truth: Truth) -> dict[str, Any]:
     """The floor under the load as the plant applied it at the final instant (all zero without
     friction): ``coulomb`` μ, ``static`` μ_s, ``viscous`` b (N s/m), ``friction_radius`` c (m:
-    a pure spin meets ``μ m g c``), ``viscous_radius2`` ρ² (m²: a spin meets ``b ρ² ω``), and
+    a pure spin meets ``μ m g c``), ``coulomb_torque`` ``τ_c = μ m g c`` (N m, what the robots'
+    ``friction_torque`` estimates), ``viscous_radius2`` ρ² (m²: a spin meets ``b ρ² ω``), and
     the floor's ``friction_force`` (N, ``[x, y]``) and ``friction_torque`` (N m, about the COM)
     averaged over the last period."""
     return {
@@ -115,6 +125,7 @@ def ground_dict(truth: Truth) -> dict[str, Any]:
         "static": _number(truth.ground_static),
         "viscous": _number(truth.ground_viscous),
         "friction_radius": _number(truth.friction_radius),
+        "coulomb_torque": _number(truth.coulomb_torque),
         "viscous_radius2": _number(truth.viscous_radius2),
         "friction_force": _vec(truth.friction_force),
         "friction_torque": _number(truth.friction_torque),
@@ -133,6 +144,7 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
             **dict.fromkeys(("mass_std", "moment_std", "contact_to_com_cov")),
             "relative_positions_cov": {},
             **dict.fromkeys(("drive_gain", "drive_gain_std")),
+            **dict.fromkeys(FRICTION_KEYS),
         }
     return {
         "mass": _number(est.mass),
@@ -155,6 +167,7 @@ def _robot_dict(est: Estimates | None, period: float) -> dict[str, Any]:
         },
         "drive_gain": _number(est.drive_gain),
         "drive_gain_std": _number(est.drive_gain_std),
+        **{key: _number(getattr(est, key)) for key in FRICTION_KEYS},
     }
 
 
@@ -173,8 +186,9 @@ def errors(outcome: RunOutcome) -> dict[str, float | None]:
     (:func:`agent.platform.evaluation.team_errors`).
 
     Keys are :data:`~agent.platform.evaluation.ERROR_KEYS`: ``mass_rel`` and ``moment_rel``
-    are relative (``|m̂ − m| / m``), the ``_m`` keys are Euclidean distances in metres and
-    ``omega_rad_s`` is ``|ω̂ − ω|``. A value is None when some robot has no such estimate.
+    are relative (``|m̂ − m| / m``), the ``_m`` keys are Euclidean distances in metres,
+    ``omega_rad_s`` is ``|ω̂ − ω|``, ``friction_torque_nm`` ``|τ̂_c − μ m g c|`` (N m) and
+    ``coulomb`` ``|μ̂ − μ|``. A value is None when some robot has no such estimate.
     """
     final = outcome.final
     found = evaluation.team_errors(final.estimates, final.truth, _neighbours(outcome))
@@ -184,9 +198,10 @@ def errors(outcome: RunOutcome) -> dict[str, float | None]:
 # ------------------------------------------------------------------------------ intervals
 def intervals(outcome: RunOutcome, robot: int) -> dict[str, Any] | None:
     """Robot ``robot``'s published 95 % intervals against the truth at the final instant:
-    ``{"mass": [half-width kg, inside], "moment": [...], "contact_to_com": [half-width m,
-    inside], "relative_positions": [widest half-width m, every edge inside]}``, ``None`` for a
-    quantity without an uncertainty; ``None`` for a robot that published none."""
+    ``{"mass": [half-width kg, inside], "moment": [...], "friction_torque": [half-width N m,
+    inside], "coulomb": [...], "contact_to_com": [half-width m, inside], "relative_positions":
+    [widest half-width m, every edge inside]}``, ``[None, None]`` for a quantity without an
+    uncertainty; ``None`` for a robot that published none."""
     est = outcome.final.estimates.get(robot)
     if est is None or (est.mass_std is None and not est.relative_positions_cov):
         return None
@@ -194,6 +209,10 @@ def intervals(outcome: RunOutcome, robot: int) -> dict[str, Any] | None:
     return {
         "mass": list(scalar_interval(est.mass, est.mass_std, truth.mass)),
         "moment": list(scalar_interval(est.moment, est.moment_std, truth.moment)),
+        "friction_torque": list(
+            scalar_interval(est.friction_torque, est.friction_torque_std, truth.coulomb_torque)
+        ),
+        "coulomb": list(scalar_interval(est.coulomb, est.coulomb_std, truth.ground_coulomb)),
         "contact_to_com": list(
             planar_interval(
                 est.contact_to_com, est.contact_to_com_cov, truth.contact_to_com[robot - 1]
@@ -434,6 +453,26 @@ def _table_row(
     )
 
 
+def _robots_block(
+    outcome: RunOutcome,
+    header: str,
+    row: Callable[..., str],
+    values: Callable[[Estimates], tuple],
+    truth: tuple,
+) -> list[str]:
+    """A block of the table: ``header`` underlined, each robot's ``row(label, *values(est),
+    errors)`` (its values ``-`` when it reported nothing), the truth's and the worst errors."""
+    lines = [header, "-" * len(header)]
+    none = (None,) * len(truth)
+    for i in range(1, outcome.scenario.n + 1):
+        est = outcome.final.estimates.get(i)
+        shown = none if est is None else values(est)
+        lines.append(row(str(i), *shown, robot_errors(outcome, i)))
+    lines.append(row("truth", *truth, {}))
+    lines.append(row("worst", *none, errors(outcome)))
+    return lines
+
+
 def _time(value: float | None) -> str:
     """A time as ``'   3.40 s'``, or ``-`` in the same width."""
     return f"{'-':>7}  " if value is None else f"{value:7.2f} s"
@@ -441,7 +480,9 @@ def _time(value: float | None) -> str:
 
 def format_table(outcome: RunOutcome) -> str:
     """A fixed-width table (under 100 columns): each robot's m̂, Ĵ and ``contact_to_com``
-    with their errors, the truth, the worst errors, and each paper step's start and end."""
+    with their errors, the truth, the worst errors (and likewise ``τ̂_c`` and ``μ̂`` when some
+    robot estimated the floor's friction), each paper step's start and end, and the 95 %
+    intervals the robots published."""
     truth = outcome.final.truth
     status = "converged" if outcome.converged else f"NOT converged ({outcome.reason})"
     lines = [
@@ -449,18 +490,15 @@ def format_table(outcome: RunOutcome) -> str:
         f" ({outcome.wall_s:.2f} s wall); estimates at t = {outcome.final.time_s:.2f} s",
         "ctc = contact_to_com = p_C - p_Ci (world frame); z_ij err: worst over i's neighbours",
         "",
-        _HEADER,
-        "-" * len(_HEADER),
     ]
-    for i in range(1, outcome.scenario.n + 1):
-        est = outcome.final.estimates.get(i)
-        errs = robot_errors(outcome, i)
-        if est is None:
-            lines.append(_table_row(str(i), None, None, None, errs))
-        else:
-            lines.append(_table_row(str(i), est.mass, est.moment, est.contact_to_com, errs))
-    lines.append(_table_row("truth", truth.mass, truth.moment, None, {}))
-    lines.append(_table_row("worst", None, None, None, errors(outcome)))
+    lines += _robots_block(
+        outcome,
+        _HEADER,
+        _table_row,
+        lambda est: (est.mass, est.moment, est.contact_to_com),
+        (truth.mass, truth.moment, None),
+    )
+    lines += _friction_lines(outcome)
     lines += ["", f"{'paper step':<30} {'start':>7}    {'end':>7}"]
     for row in step_times(outcome):
         label = f"{row['step']} {row['name']}"
@@ -512,36 +550,86 @@ def _changes_line(changes: dict[str, Any]) -> str:
     return f"load changes: {'; '.join(parts) or 'none'}; false alarms: {alarms}"
 
 
+def _published_friction(outcome: RunOutcome) -> bool:
+    """Whether some robot published a friction estimate (the robust estimators do)."""
+    return any(
+        est.friction_torque is not None or est.coulomb is not None
+        for est in outcome.final.estimates.values()
+    )
+
+
+_FRICTION_HEADER = f"{'robot':>5} {'tau_c [N m]':>11} {'mu':>9} {'tau_c err N m':>13} {'mu err':>9}"
+
+
+def _friction_row(
+    label: str, torque: float | None, mu: float | None, errs: dict[str, float | None]
+) -> str:
+    """One line of the friction table; ``-`` where a value is missing."""
+    return (
+        f"{label:>5} {_fmt(torque, '.5f', 11)} {_fmt(mu, '.6f', 9)}"
+        f" {_fmt(errs.get('friction_torque_nm'), '.5f', 13)} {_fmt(errs.get('coulomb'), '.6f', 9)}"
+    )
+
+
+def _friction_lines(outcome: RunOutcome) -> list[str]:
+    """Each robot's ``τ̂_c`` and ``μ̂`` with their errors (absolute: N m, and μ's own unit), the
+    truth's ``μ m g c`` and ``μ``, and the worst errors (no robot published friction: no
+    lines)."""
+    if not _published_friction(outcome):
+        return []
+    truth = outcome.final.truth
+    return [
+        "",
+        "tau_c: friction torque on a spin about the COM (truth mu m g c); mu: kinetic coefficient",
+        *_robots_block(
+            outcome,
+            _FRICTION_HEADER,
+            _friction_row,
+            lambda est: (est.friction_torque, est.coulomb),
+            (truth.coulomb_torque, truth.ground_coulomb),
+        ),
+    ]
+
+
 def _interval_lines(outcome: RunOutcome) -> list[str]:
     """The 95 % intervals' half-widths and whether the truth is inside (robots that published
-    an uncertainty; none: no lines)."""
+    an uncertainty; none: no lines); ``τ̂_c``'s and ``μ̂``'s when some robot published
+    friction."""
     rows = {i: intervals(outcome, i) for i in range(1, outcome.scenario.n + 1)}
     if not any(rows.values()):
         return []
+    friction = _published_friction(outcome)
     lines = [
         "",
         f"{'95 % intervals':<14} {'m ±%':>8} {'J ±%':>8} {'ctc ±mm':>9} {'z_ij ±mm':>9}"
-        "   truth inside",
+        + (f" {'tau_c ±N m':>11} {'mu ±':>9}" if friction else "")
+        + "   truth inside",
     ]
     truth = outcome.final.truth
     for i, row in rows.items():
         if row is None:
-            lines.append(f"{'robot ' + str(i):<14} {'-':>8} {'-':>8} {'-':>9} {'-':>9}")
+            lines.append(
+                f"{'robot ' + str(i):<14} {'-':>8} {'-':>8} {'-':>9} {'-':>9}"
+                + (f" {'-':>11} {'-':>9}" if friction else "")
+            )
             continue
-        inside = [
-            name
-            for name, key in (("m", "mass"), ("J", "moment"), ("ctc", "contact_to_com"))
-            if row[key][1]
-        ]
-        if row["relative_positions"][1]:
-            inside.append("z_ij")
+        names = (("m", "mass"), ("J", "moment"), ("ctc", "contact_to_com"))
+        names += (("z_ij", "relative_positions"),)
+        if friction:
+            names += (("tau_c", "friction_torque"), ("mu", "coulomb"))
+        inside = [name for name, key in names if row[key][1]]
         lines.append(
             f"{'robot ' + str(i):<14}"
             f" {_fmt(_scaled(row['mass'][0], 100 / truth.mass), '.3f', 8)}"
             f" {_fmt(_scaled(row['moment'][0], 100 / truth.moment), '.3f', 8)}"
             f" {_fmt(_scaled(row['contact_to_com'][0], 1000), '.2f', 9)}"
             f" {_fmt(_scaled(row['relative_positions'][0], 1000), '.2f', 9)}"
-            f"   {' '.join(inside) or 'none'}"
+            + (
+                f" {_fmt(row['friction_torque'][0], '.5f', 11)} {_fmt(row['coulomb'][0], '.6f', 9)}"
+                if friction
+                else ""
+            )
+            + f"   {' '.join(inside) or 'none'}"
         )
     return lines
 

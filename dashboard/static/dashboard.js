@@ -678,9 +678,10 @@ function put(id, property, value) {
 
 // ------------------------------------------------------------------------ the table
 // Beside each value with a published uncertainty, "± h": its 95 % interval's half-width, in the
-// value's unit (kg, kg m²; mm for p̂_C − p_Ci and ẑ_ij, along the 95 % ellipse's longest axis,
-// as heft run's "95 % intervals" table); beside its error, ✓ when the truth lies inside the
-// interval (the ellipse), ✗ when it does not.
+// value's unit (kg, kg m², N m; mm for p̂_C − p_Ci and ẑ_ij, along the 95 % ellipse's longest
+// axis, as heft run's "95 % intervals" table); beside its error (relative in %, else in the
+// value's unit and decimals), ✓ when the truth lies inside the interval (the ellipse), ✗ when
+// it does not.
 function plain(symbol) { return symbol.normalize("NFD").replace(/\u0302/g, ""); }
 function plusMinus(interval, factor, digits) {
   const h = Array.isArray(interval) ? interval[0] : null;
@@ -716,7 +717,7 @@ function drawTable(scene) {
       + `${row.phase}${row.load_changes ? ` <span class="restarts">(load changes: ${row.load_changes})</span>` : ""}`
       + `${row.rejoins ? ` <span class="restarts">(begun again: rejoin ${row.rejoins})</span>` : ""}</td>`
       + scalars.map((s) => `<td>${fmt(row[s.key], s.digits)}${plusMinus(intervals[s.key], 1, s.digits)}</td>`).join("")
-      + judged.map((s) => `<td>${fmt(scaled(e[s.error], s.relative ? 100 : 1), 3)}${verdict(intervals[s.key])}</td>`).join("")
+      + judged.map((s) => `<td>${fmt(scaled(e[s.error], s.relative ? 100 : 1), s.relative ? 3 : s.digits)}${verdict(intervals[s.key])}</td>`).join("")
       + `<td>${fmt(scaled(e.contact_to_com_m, 1000), 2)}${verdict(intervals.contact_to_com)}`
       + `${plusMinus(intervals.contact_to_com, 1000, 2)}</td>`
       + `<td>${fmt(scaled(e.relative_positions_m, 1000), 2)}${verdict(intervals.relative_positions)}`

@@ -270,11 +270,19 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
             companion.close()
 
 
+JUDGED = ("mass", "moment", "friction_torque", "coulomb", "contact_to_com", "relative_positions")
+"""The table's error columns, after the robot, its phase and the four scalars' values."""
+NOISY_INSIDE = ("mass", "moment", "contact_to_com", "relative_positions")
+"""What every robot's 95 % intervals hold in the noisy scenario's run."""
+
+
 def test_a_robust_runs_page_shows_how_sure_each_robot_is(tmp_path: Path) -> None:
     """The noisy scenario's robust run (in one process), recorded and replayed into the page:
     each m̂ has its 95 % band, painted by uPlot, as wide as ``±1.96 σ`` of what the robot
-    published; the table gives ``±`` beside each value and whether the truth lies inside."""
+    published; the table gives ``±`` beside each value (the floor's friction ``τ̂_c`` and
+    ``μ̂`` too) and whether the truth lies inside, as ``heft run``'s intervals say."""
     from simulator.inprocess import run_inprocess
+    from simulator.results import intervals
 
     sync_playwright = chromium()
     scenario = load_scenario(NOISY)
@@ -300,12 +308,19 @@ def test_a_robust_runs_page_shows_how_sure_each_robot_is(tmp_path: Path) -> None
                 assert band["upper"] == pytest.approx(est.mass + half, abs=1e-8)
             painted = page.evaluate(BAND_PIXELS, "mass")
             assert painted["bands"] == 4 and painted["changed"] > 0.02 * painted["of"], painted
-            # The table: "±" under each m̂, Ĵ, c and z; the truth inside each (✓), as here.
+            # The table: "±" under each m̂, Ĵ, τ̂_c, μ̂, c and z; beside each error ✓ or ✗ as
+            # heft run's intervals say (the truth of m, J, c and z inside each, as here).
             table = page.inner_text("#table")
-            assert table.count("±") == 4 * 4 and table.count("✓") == 4 * 4, table
+            assert table.count("±") == 6 * 4 and table.count("✓") >= 4 * 4, table
             for i, est in final.items():
-                cell = page.inner_text(f"#table tr:nth-child({i + 1}) td:nth-child(3)")
-                assert cell.split() == [f"{est.mass:.4f}", f"±{SCALAR_95 * est.mass_std:.4f}"]
+                cells = page.locator(f"#table tr:nth-child({i + 1}) td").all_inner_texts()
+                assert cells[2].split() == [f"{est.mass:.4f}", f"±{SCALAR_95 * est.mass_std:.4f}"]
+                half = SCALAR_95 * est.coulomb_std
+                assert cells[5].split() == [f"{est.coulomb:.5f}", f"±{half:.5f}"]
+                judged = intervals(outcome, i)
+                for column, key in enumerate(JUDGED, start=6):
+                    assert ("✓" if judged[key][1] else "✗") in cells[column], (key, cells)
+                assert all(judged[key][1] for key in JUDGED if key in NOISY_INSIDE)
             page.screenshot(path=str(SCREENSHOT.with_name("dashboard-robust.png")))
             assert errors == []
     finally:

@@ -14,11 +14,12 @@ import pytest
 
 from agent.platform.evaluation import ERROR_KEYS, PLANAR_95, SCALAR_95
 from agent.platform.geometry import largest_std
-from agent.platform.protocol import Estimates, Phase, Truth
+from agent.platform.protocol import GRAVITY, Estimates, Phase, Truth
 from dashboard.app import to_json
 from dashboard.hub import Hub
 from dashboard.quantities import DECLARATIONS, SCALARS
 from dashboard.state import TeamState
+from tests.helpers.floor import FLOOR
 from tests.helpers.paths import ROOT
 
 NOISY = ROOT / "simulator" / "scenarios" / "paper-noisy.toml"
@@ -59,13 +60,13 @@ def test_every_point_with_an_uncertainty_carries_its_95_percent_half_width(noisy
     series = state.all_series()
     final = outcome.final.estimates
     for i, est in final.items():
-        # The charts end with the final estimates, each with 1.96 σ.
-        assert series[f"mass/{i}"][-1] == [
-            state.t(est.tick),
-            round(est.mass, 9),
-            round(SCALAR_95 * est.mass_std, 9),
-        ]
-        assert series[f"moment/{i}"][-1][2] == round(SCALAR_95 * est.moment_std, 9)
+        # The charts end with the final estimates, each with 1.96 σ: m̂, Ĵ, τ̂_c and μ̂.
+        for scalar in SCALARS:
+            assert series[f"{scalar.key}/{i}"][-1] == [
+                state.t(est.tick),
+                round(getattr(est, scalar.key), 9),
+                round(SCALAR_95 * getattr(est, scalar.std), 9),
+            ], scalar.key
         ctc = series[f"ctc/{i}"][-1]
         assert ctc[1] == round(math.hypot(*est.contact_to_com), 9)
         assert ctc[2] == pytest.approx(along(est.contact_to_com, est.contact_to_com_cov))
@@ -78,6 +79,8 @@ def test_every_point_with_an_uncertainty_carries_its_95_percent_half_width(noisy
         assert series[f"ctc/{i}/truth"][-1][1] == pytest.approx(
             math.hypot(*outcome.final.truth.contact_to_com[i - 1])
         )
+    # The friction's truth on this frictionless floor: μ m g c = 0 and μ = 0.
+    assert {p[1] for p in series["friction_torque/truth"] + series["coulomb/truth"]} == {0.0}
     # The truth has no interval, ω none published.
     for trace, points in series.items():
         if trace.endswith("truth") or trace.startswith("omega/"):
@@ -99,13 +102,20 @@ def test_the_tables_intervals_are_heft_runs(noisy_run) -> None:
         row = state.final["robots"][robot]
         assert row["intervals"] == intervals(outcome, i)  # the "95 % intervals" table's
         assert page["robots"][robot]["intervals"] == row["intervals"]
-        # Here every truth lies inside (heft run's table says so too).
-        assert all(inside for _, inside in row["intervals"].values())
+        # Here every truth of m, J, c and z lies inside (heft run's table says so too).
+        paper = ("mass", "moment", "contact_to_com", "relative_positions")
+        assert all(row["intervals"][key][1] for key in paper), row["intervals"]
+        # The friction's intervals are judged too, against μ m g c = 0 and μ = 0.
+        for key in ("friction_torque", "coulomb"):
+            half, inside = row["intervals"][key]
+            assert half > 0 and inside is (abs(row[key]) <= half)
     # The snapshot carries what each robot published.
     robots = state.scene(100.0)["robots"]
     for i, est in outcome.final.estimates.items():
         view = robots[str(i)]
         assert view["mass_std"] == est.mass_std and view["moment_std"] == est.moment_std
+        assert view["friction_torque_std"] == est.friction_torque_std
+        assert view["coulomb_std"] == est.coulomb_std
         assert view["contact_to_com_cov"] == est.contact_to_com_cov
         assert view["relative_positions_cov"] == {
             str(j): c for j, c in est.relative_positions_cov.items()
@@ -130,7 +140,7 @@ def test_the_top_view_draws_each_robots_95_percent_com_ellipse(noisy_run) -> Non
 
 def test_the_page_is_told_the_scalars_it_charts() -> None:
     hello = Hub("t").hello()
-    assert [s["key"] for s in hello["scalars"]] == ["mass", "moment"]
+    assert [s["key"] for s in hello["scalars"]] == ["mass", "moment", "friction_torque", "coulomb"]
     assert hello["scalars"][0] == {
         "key": "mass",
         "symbol": "m̂",
@@ -140,13 +150,59 @@ def test_the_page_is_told_the_scalars_it_charts() -> None:
         "error": "mass_rel",
         "relative": True,
     }
+    assert hello["scalars"][2]["relative"] is False  # τ̂_c's error is in N m: μ m g c may be 0
     assert json.loads(to_json(DECLARATIONS)) == DECLARATIONS
-    # Each declaration names what the messages and the errors have.
+    # Each declaration names what the messages and the errors have (the truth: a field or a
+    # property, such as τ_c = μ m g c).
     estimates = {f.name for f in dataclasses.fields(Estimates)}
-    truth = {f.name for f in dataclasses.fields(Truth)}
     for scalar in SCALARS:
-        assert {scalar.key, scalar.std} <= estimates and scalar.truth in truth
+        assert {scalar.key, scalar.std} <= estimates
+        assert isinstance(getattr(FLOOR, scalar.truth), float), scalar.truth
         assert scalar.error is None or scalar.error in ERROR_KEYS
+
+
+def test_the_floors_friction_is_charted_and_judged_against_mu_m_g_c() -> None:
+    """``τ̂_c`` against the truth's ``μ m g c`` and ``μ̂`` against ``μ``: each robot's chart
+    point with its 95 % band, the truth's line, and in the page's table the values, their
+    absolute errors and intervals; a robot that estimates no friction (the paper's estimators)
+    has none of them."""
+    torque = 0.02 * 5.0 * GRAVITY * 1.5
+    assert FLOOR.coulomb_torque == pytest.approx(torque)
+    state = TeamState("t")
+    state.ingest(FLOOR, 0.1)
+    sure = Estimates(
+        1,
+        10,
+        Phase.PUSH,
+        relative_positions={2: (-2.0, 0.0)},
+        friction_torque=torque + 0.01,
+        friction_torque_std=0.01,  # 1.96 σ = 0.0196 N m: the truth inside
+        coulomb=0.0203,
+        coulomb_std=1e-4,  # 1.96 σ = 0.000196: the truth, 0.0003 away, outside
+    )
+    state.ingest(sure, 0.1)
+    state.ingest(Estimates(2, 10, Phase.PUSH, relative_positions={1: (2.0, 0.0)}), 0.1)
+    frame = json.loads(to_json(state.frame(0.2)))
+    points = frame["points"]
+    assert points["friction_torque/1"] == [
+        [0.1, round(torque + 0.01, 9), round(0.01 * SCALAR_95, 9)]
+    ]
+    assert points["coulomb/1"] == [[0.1, 0.0203, round(1e-4 * SCALAR_95, 9)]]
+    assert points["friction_torque/truth"] == [[0.1, round(torque, 9)]]
+    assert points["coulomb/truth"] == [[0.1, 0.02]]
+    assert "friction_torque/2" not in points and "coulomb/2" not in points
+    table = frame["scene"]["table"]
+    row = table["robots"]["1"]
+    assert (row["friction_torque"], row["coulomb"]) == (torque + 0.01, 0.0203)
+    assert row["errors"]["friction_torque_nm"] == pytest.approx(0.01)
+    assert row["errors"]["coulomb"] == pytest.approx(3e-4)
+    assert row["intervals"]["friction_torque"] == [pytest.approx(0.01 * SCALAR_95), True]
+    assert row["intervals"]["coulomb"] == [pytest.approx(1e-4 * SCALAR_95), False]
+    other = table["robots"]["2"]
+    assert other["friction_torque"] is None and other["errors"]["coulomb"] is None
+    assert "friction_torque" not in other["intervals"] and "coulomb" not in other["intervals"]
+    assert table["truth"]["friction_torque"] == pytest.approx(torque)
+    assert table["truth"]["coulomb"] == 0.02
 
 
 BAD_STDS = [math.nan, math.inf, -1.0, 1e308]
@@ -173,6 +229,10 @@ def test_an_uncertainty_that_cannot_be_one_is_dropped(std, cov) -> None:
         contact_to_com=(1.0, 0.0),
         mass_std=std,
         moment_std=std,
+        friction_torque=1.0,
+        friction_torque_std=std,
+        coulomb=0.02,
+        coulomb_std=std,
         contact_to_com_cov=cov,
         relative_positions_cov={2: cov},
     )
@@ -183,6 +243,8 @@ def test_an_uncertainty_that_cannot_be_one_is_dropped(std, cov) -> None:
         contact_to_com=(-1.0, 0.0),
         mass_std=0.1,
         moment_std=0.1,
+        friction_torque_std=0.1,
+        coulomb_std=0.001,
         contact_to_com_cov=(1e-4, 0.0, 1e-4),
         relative_positions_cov={1: (1e-4, 0.0, 1e-4)},
     )
@@ -190,14 +252,16 @@ def test_an_uncertainty_that_cannot_be_one_is_dropped(std, cov) -> None:
     state.ingest(good, 0.1)
     frame = json.loads(to_json(state.frame(0.2)))
     points = frame["points"]
-    for trace in ("mass/1", "moment/1", "ctc/1", "edge/1-2"):
+    scalars = [s.key for s in SCALARS]
+    assert scalars == ["mass", "moment", "friction_torque", "coulomb"]
+    for trace in (*(f"{key}/1" for key in scalars), "ctc/1", "edge/1-2"):
         assert points[trace] == [[0.1, points[trace][0][1]]], trace  # the estimate, no band
-    for trace in ("mass/2", "moment/2", "ctc/2"):
+    for trace in (*(f"{key}/2" for key in scalars), "ctc/2"):
         assert len(points[trace][0]) == 3, trace
     rows = frame["scene"]["table"]["robots"]
     assert rows["1"]["intervals"] == {}  # the page is sent only those published
     assert rows["2"]["intervals"]["mass"] == [pytest.approx(SCALAR_95 * 0.1), True]
-    assert set(rows["2"]["intervals"]) == {"mass", "moment", "contact_to_com", "relative_positions"}
+    assert set(rows["2"]["intervals"]) == {*scalars, "contact_to_com", "relative_positions"}
     assert set(frame["scene"]["top"]["com_ellipses"]) == {"2"}
     scene = state.scene(0.2)
     intervals = scene["table"]["robots"]["1"]["intervals"]
@@ -205,6 +269,7 @@ def test_an_uncertainty_that_cannot_be_one_is_dropped(std, cov) -> None:
     assert all(interval == [None, None] for interval in intervals.values())
     view = scene["robots"]["1"]
     # As published when it can be a standard deviation (1e308 can, its interval cannot).
-    assert view["mass_std"] == (std if math.isfinite(std) and std >= 0 else None)
+    for key in ("mass_std", "friction_torque_std", "coulomb_std"):
+        assert view[key] == (std if math.isfinite(std) and std >= 0 else None)
     assert view["contact_to_com_cov"] is None
     assert view["relative_positions_cov"] == {"2": None}

@@ -5,14 +5,19 @@ tests/integration/test_recording_over_zenoh.py."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
 
+from agent.platform.evaluation import SCALAR_95
+from agent.platform.protocol import Estimates, Keys, Phase
+from dashboard.recorder import Recorder
 from dashboard.replay import Recording, RecordingError, Replayer
 from dashboard.state import TeamState
+from tests.helpers.floor import FLOOR
 from tests.helpers.paths import PAPER
 from tests.helpers.recordings import record_run
 
@@ -91,3 +96,35 @@ def test_what_is_not_a_recording_is_refused(tmp_path: Path) -> None:
     (tmp_path / "junk.mcap").write_bytes(b"not mcap at all")
     with pytest.raises(RecordingError, match="not an MCAP file"):
         Recording(tmp_path / "junk.mcap")
+
+
+def test_a_recording_carries_the_floors_friction(tmp_path: Path) -> None:
+    """The truth's floor and each robot's friction estimates with their standard deviations
+    cross a recording whole; the replay charts ``τ̂_c`` and ``μ̂`` with their 95 % bands
+    against the truth's ``μ m g c`` and ``μ``."""
+    keys = Keys("floor")
+    truth = dataclasses.replace(FLOOR, tick=200, time_s=2.0)
+    est = Estimates(
+        1,
+        200,
+        Phase.PUSH,
+        friction_torque=1.47,
+        friction_torque_std=0.01,
+        coulomb=0.0201,
+        coulomb_std=1e-4,
+    )
+    path = tmp_path / "floor.mcap"
+    with Recorder(path, "floor") as recorder:
+        recorder.write(keys.truth(), truth, 1)
+        recorder.write(keys.estimate(1), est, 2)
+    recording = Recording(path)
+    replayed = [r.message for r in recording.messages()]
+    assert replayed == [truth, est] and not recording.rejected
+    state = TeamState("floor")
+    for message in replayed:
+        state.ingest(message, 0.0)
+    series = state.all_series()
+    assert series["friction_torque/1"] == [[2.0, 1.47, round(0.01 * SCALAR_95, 9)]]
+    assert series["coulomb/1"] == [[2.0, 0.0201, round(1e-4 * SCALAR_95, 9)]]
+    assert series["friction_torque/truth"] == [[2.0, round(truth.coulomb_torque, 9)]]
+    assert series["coulomb/truth"] == [[2.0, 0.02]]

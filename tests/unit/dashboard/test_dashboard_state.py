@@ -33,8 +33,11 @@ from agent.platform.protocol import (
 )
 from agent.platform.team import ConsensusState
 from dashboard import channels
+from dashboard.quantities import SCALARS
 from dashboard.state import KEEP_TICKS, MAX_SEGMENTS, TeamState
 from tests.helpers.paths import PAPER
+
+SCALAR_KEYS = [s.key for s in SCALARS]
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +112,7 @@ def test_the_papers_estimators_publish_no_uncertainty_and_get_no_band(paper_run)
     feed(state, outcome)
     assert {len(p) for points in state.all_series().values() for p in points} == {2}
     for row in state.final["robots"].values():
-        assert set(row["intervals"]) == {"mass", "moment", "contact_to_com", "relative_positions"}
+        assert set(row["intervals"]) == {*SCALAR_KEYS, "contact_to_com", "relative_positions"}
         assert all(interval == [None, None] for interval in row["intervals"].values())
     assert state.top_view()["com_ellipses"] == {}
     page = state.page_scene(100.0)["table"]["robots"]
@@ -133,14 +136,21 @@ def test_the_pages_scene_is_the_scene_less_what_the_page_does_not_draw(paper_run
         assert drawn == {k: full[k] for k in ("phase", "tick", "segments", "alive")}
         row = page["table"]["robots"][i]
         errors = final["robots"][i]["errors"]
-        drawn = ("mass_rel", "moment_rel", "contact_to_com_m", "relative_positions_m")
+        drawn = (*(s.error for s in SCALARS), "contact_to_com_m", "relative_positions_m")
         assert row["errors"] == {key: errors[key] for key in drawn}
+        assert errors["friction_torque_nm"] is None  # the paper's estimators: no friction
         assert (row["mass"], row["moment"]) == (
             final["robots"][i]["mass"],
             final["robots"][i]["moment"],
         )
     assert page["table"]["final"] and page["table"]["t"] == final["t"]
-    assert page["table"]["truth"] == {"mass": 5.0, "moment": final["truth"]["moment"]}
+    assert page["table"]["truth"] == {
+        "mass": 5.0,
+        "moment": final["truth"]["moment"],
+        "friction_torque": 0.0,  # a frictionless floor: μ m g c = 0
+        "coulomb": 0.0,
+    }
+    assert SCALAR_KEYS == ["mass", "moment", "friction_torque", "coulomb"]
 
 
 def test_a_lost_message_of_the_final_instant_moves_it_to_the_next_complete_one(paper_run) -> None:

@@ -86,6 +86,8 @@ def test_the_paper_scenario_with_real_sensor_noise(seed: int) -> None:
     assert set(document["intervals"]["1"]) == {
         "mass",
         "moment",
+        "friction_torque",
+        "coulomb",
         "contact_to_com",
         "relative_positions",
     }
