@@ -253,7 +253,8 @@ def baseline_errors(outcome: RunOutcome, found: BaselineFit | None) -> dict[str,
     """The batch fit ``found`` (:func:`baseline_fit`) against the truth at the run's final
     instant, as the robots' estimates are (:func:`~agent.platform.evaluation.team_errors`;
     its m, J, ``contact_to_com`` and ``z_ij``), and its friction's absolute errors
-    (:data:`FRICTION_KEYS`); ``None`` everywhere if the fit failed."""
+    (:data:`FRICTION_KEYS`, ``None`` if fitted without); ``None`` everywhere if the fit
+    failed."""
     from simulator.baseline import truth_friction
 
     if found is None:
@@ -274,10 +275,11 @@ def baseline_errors(outcome: RunOutcome, found: BaselineFit | None) -> dict[str,
         for i, neighbours in graph.items()
     }
     torque, drag = truth_friction(truth)
+    friction = found.friction_torque is not None and found.spin_drag is not None
     return {
         **team_errors(fitted, truth, graph),
-        "friction_torque_Nm": abs(found.friction_torque - torque),
-        "spin_drag_N_m": abs(found.spin_drag - drag),
+        "friction_torque_Nm": abs(found.friction_torque - torque) if friction else None,
+        "spin_drag_N_m": abs(found.spin_drag - drag) if friction else None,
     }
 
 
