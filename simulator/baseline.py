@@ -75,6 +75,8 @@ MIN_SIGMA_F = 1e-4
 """N: the floor of the force noise used as a weight."""
 TURNING_EPSILONS = 3.0
 """An interval whose ``|ω̄|`` is below this many ``ε`` is left out (see the module docstring)."""
+GRAVITY = 9.81
+"""m/s²: ``g``, for the truth's ``τ_c = μ m g c``."""
 MAX_SLIP = 2.0
 """An interval whose ``‖ū‖ / (ρ |ω̄|)`` is above this is left out (see the module docstring)."""
 
@@ -167,11 +169,19 @@ def fit(
     return model.result(solution, first_tick)
 
 
-def truth_friction(truth) -> tuple[float, float]:
-    """The friction torque ``τ_c`` and spin drag ``κ`` of the floor in a recorded
-    :class:`~agent.platform.protocol.Truth`, the fit's parameters: ``(0, 0)`` for a truth that
-    carries none (a frictionless floor)."""
-    return getattr(truth, "friction_torque", 0.0), getattr(truth, "spin_drag", 0.0)
+def truth_friction(truth) -> tuple[float | None, float | None]:
+    """The floor's friction torque ``τ_c`` and spin drag ``κ`` (the fit's parameters) in a
+    recorded :class:`~agent.platform.protocol.Truth`: ``(0, 0)`` on a frictionless floor (a
+    truth without Coulomb friction, ``ground_coulomb``); else as the truth derives them
+    (``friction_torque``, ``spin_drag``), or ``τ_c = μ m g c`` from its friction radius ``c``
+    where it does not, None where it gives neither."""
+    coulomb = getattr(truth, "ground_coulomb", 0.0)
+    if not coulomb:
+        return 0.0, 0.0
+    if hasattr(truth, "spin_drag"):
+        return truth.friction_torque, truth.spin_drag
+    radius = getattr(truth, "friction_radius", None)
+    return (None if radius is None else coulomb * GRAVITY * truth.mass * radius), None
 
 
 def turning(omega: np.ndarray, speed: np.ndarray, epsilon: float, radius: float) -> np.ndarray:

@@ -98,7 +98,8 @@ floor's 2 rad/s (``heft bench noise --generated 20`` gives the largest ``|ω|`` 
 and how many kept to their floor)."""
 FRICTION_KEYS = ("friction_torque_Nm", "spin_drag_N_m")
 """The baseline's friction errors (:func:`baseline_errors`): ``|τ̂_c − τ_c|`` (N m) and
-``|κ̂ − κ|`` (N/m), against the truth's (0 on a frictionless floor)."""
+``|κ̂ − κ|`` (N/m), against the truth's (:func:`~simulator.baseline.truth_friction`; 0 on a
+frictionless floor)."""
 SWEEP = (0.0, 0.001, 0.003, 0.01, 0.03)
 """σ_v (m/s) of the sweep; σ_f = 50 σ_v."""
 
@@ -253,8 +254,8 @@ def baseline_errors(outcome: RunOutcome, found: BaselineFit | None) -> dict[str,
     """The batch fit ``found`` (:func:`baseline_fit`) against the truth at the run's final
     instant, as the robots' estimates are (:func:`~agent.platform.evaluation.team_errors`;
     its m, J, ``contact_to_com`` and ``z_ij``), and its friction's absolute errors
-    (:data:`FRICTION_KEYS`, ``None`` if fitted without); ``None`` everywhere if the fit
-    failed."""
+    (:data:`FRICTION_KEYS`, ``None`` if fitted without or the truth lacks it); ``None``
+    everywhere if the fit failed."""
     from simulator.baseline import truth_friction
 
     if found is None:
@@ -274,12 +275,14 @@ def baseline_errors(outcome: RunOutcome, found: BaselineFit | None) -> dict[str,
         )
         for i, neighbours in graph.items()
     }
-    torque, drag = truth_friction(truth)
-    friction = found.friction_torque is not None and found.spin_drag is not None
+    true = truth_friction(truth)
+    fitted_friction = (found.friction_torque, found.spin_drag)
     return {
         **team_errors(fitted, truth, graph),
-        "friction_torque_Nm": abs(found.friction_torque - torque) if friction else None,
-        "spin_drag_N_m": abs(found.spin_drag - drag) if friction else None,
+        **{
+            key: None if a is None or b is None else abs(a - b)
+            for key, a, b in zip(FRICTION_KEYS, fitted_friction, true, strict=True)
+        },
     }
 
 

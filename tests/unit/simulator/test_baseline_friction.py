@@ -7,11 +7,12 @@ whose friction the model does not describe, are left out."""
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from simulator.baseline import fit, turning
+from simulator.baseline import GRAVITY, fit, truth_friction, turning
 
 MASS, MOMENT = 5.0, 12.3795
 ARMS = np.array([[-2.0, 0.54], [-1.0, -0.86], [1.2, -0.86], [2.0, 0.74]])
@@ -175,3 +176,12 @@ def test_a_load_that_never_turns_is_refused() -> None:
     v, f = spinning_run(3.0, velocity_noise=0.01, force_noise=0.5, slide_s=3.0)
     with pytest.raises(ValueError, match="never turned"):
         fit(v, f, PERIOD, 0.01, 0.5)
+
+
+def test_the_truths_friction_is_what_the_fit_is_compared_with() -> None:
+    assert truth_friction(SimpleNamespace(mass=5.0)) == (0.0, 0.0)  # no floor: frictionless
+    assert truth_friction(SimpleNamespace(mass=5.0, ground_coulomb=0.0)) == (0.0, 0.0)
+    floor = SimpleNamespace(mass=5.0, ground_coulomb=0.02, friction_torque=1.2, spin_drag=0.4)
+    assert truth_friction(floor) == (1.2, 0.4)
+    radius_only = SimpleNamespace(mass=5.0, ground_coulomb=0.02, friction_radius=1.2)
+    assert truth_friction(radius_only) == (pytest.approx(0.02 * GRAVITY * 5.0 * 1.2), None)
