@@ -8,18 +8,20 @@ the floor's friction as the robots' estimators model it. It is what a central co
 reach, the yardstick for the distributed estimators under noise and friction.
 
 Unknowns: the constants ``m``, ``J``, the floor's friction torque ``τ_c`` (N m) and spin drag
-``κ`` (N/m), and each contact's arm ``r_i = p_Ci − p_C`` in the load frame (the load frame is
-``W`` at the first tick: ``θ_0 = 0``); and the states at each tick, the load's angle ``θ_k``
-and its COM's velocity ``u_k`` (the angular velocity ``ω_k`` is the central difference of the
-angles). With ``Q = [[0, −1], [1, 0]]``, ``R(θ)`` the rotation, ``T`` the period, and over the
-interval ``[t_{k−1}, t_k]`` the mean states ``ω̄_k = (ω_{k−1} + ω_k)/2``,
-``ū_k = (u_{k−1} + u_k)/2`` and the mid angle ``θ̄_k``, the weighted residuals are (``f_ik`` is
-the force applied over the interval, as a measurement reports it):
+``κ`` (N/m) (and its sliding friction ``F_s``, N, if the load slid), and each contact's arm
+``r_i = p_Ci − p_C`` in the load frame (the load frame is ``W`` at the first tick:
+``θ_0 = 0``); and the states at each tick, the load's angle ``θ_k`` and its COM's velocity
+``u_k`` (the angular velocity ``ω_k`` is the central difference of the angles). With
+``Q = [[0, −1], [1, 0]]``, ``R(θ)`` the rotation, ``T`` the period, and over the interval
+``[t_{k−1}, t_k]`` the mean states ``ω̄_k = (ω_{k−1} + ω_k)/2``, ``ū_k = (u_{k−1} + u_k)/2``
+and the mid angle ``θ̄_k``, the weighted residuals are (``f_ik`` is the force applied over the
+interval, as a measurement reports it):
 
 - rigid kinematics, eq. (1): ``(u_k + ω_k Q R(θ_k) r_i − v_ik) / σ_v`` per robot and tick;
-- translation: ``(m (u_k − u_{k−1}) − T Σ_i f_ik + T κ ū_k s(ω̄_k)) / (T σ_f √n)``;
+- translation: ``(m (u_k − u_{k−1}) − T Σ_i f_ik + T κ ū_k s(ω̄_k)) / (T σ_f √n)`` where the
+  load turned, ``+ T F_s ū_k / √(‖ū_k‖² + ε_u²)`` in place of the drag where it slid;
 - rotation: ``(J (ω_k − ω_{k−1}) − T Σ_i (Q R(θ̄_k) r_i)ᵀ f_ik + T τ_c ω̄_k s(ω̄_k))
-  / (T σ_f ‖r‖)``.
+  / (T σ_f ‖r‖)`` where it turned.
 
 The friction model (the robots' estimators'): Coulomb friction ``μ N_s`` at each support
 ``s`` of the load, against that support's velocity, is to first order in ``‖ṗ_C‖ / (|ω| r_s)``
@@ -33,19 +35,25 @@ up by ``τ_c`` and ``κ`` as at the run's typical turn rate). ``μ`` and the sup
 observable apart, only ``τ_c`` and ``κ``. The fit does not constrain their sign: on a
 frictionless floor they come out about 0 within their standard deviations, either side.
 
-The model is smooth where it holds. ``sgn ω`` and ``1/|ω|`` are made differentiable with
+Where the load slides rather than turns (a push it does not turn under), the same friction is,
+to first order in ``|ω| r_s / ‖ṗ_C‖``, a force ``−μ m g ṗ_C/‖ṗ_C‖`` and no torque
+(``Σ_s N_s r_s = 0``, statics); the fit adds ``F_s = μ m g`` for those intervals' translation
+(rather than leave out the push, the mass's signal) and leaves out their rotation (a small
+drag torque ``∝ ω/‖ṗ_C‖`` that neither model has). ``F_s`` is fitted only when the load slid
+over :data:`MIN_SLIDING` intervals.
+
+Each model is smooth where it holds. ``sgn ω`` and ``1/|ω|`` are made differentiable with
 ``s(ω) = 1/√(ω² + ε²)`` (``sgn ω ≈ ω s(ω)``, ``1/|ω| ≈ s(ω)``), where ``ε = σ_ω`` is the
 noise of an angular velocity read from one tick's velocities, ``σ_v / √(Σ_i ‖r_i − r̄‖²)``
-(``r̄`` the contacts' centroid). The dynamic residuals of an interval are left out, both, where
-the model does not hold (:func:`turning`): ``|ω̄_k| < 3ε`` (a load stuck or barely turning,
-whose turn's sign the noise hides; at ``3ε``, ``ω s(ω)`` and ``|ω| s(ω)`` are 0.95 of 1,
-beyond ``10ε`` over 0.995), or ``‖ū_k‖ > 2ρ |ω̄_k|`` (``ρ`` the contacts' RMS distance
-from their centroid): there the model's drag ``κ ‖ṗ_C‖ / |ω|`` would exceed ``μ m g``, the most
-that Coulomb friction at supports within ``ρ`` of the COM can pull, so the load is sliding
-more than turning. Which intervals are kept is decided at the starting point, and once more
-near the solution, from which the fit goes on. On the runs of ``heft bench noise`` this
-leaves out under 1 % of the intervals on the paper's load, up to 12 % on generated ones
-(``--generated 8``). Without friction
+(``r̄`` the contacts' centroid), and ``ṗ_C/‖ṗ_C‖`` likewise with ``ε_u = σ_v / √n``, the noise
+of the COM's velocity read from one tick. The regimes (:func:`regimes`): the load turns in an
+interval with ``|ω̄_k| ≥ 3ε`` (below, a load stuck or barely turning, whose turn's sign the
+noise hides; at ``3ε``, ``ω s(ω)`` and ``|ω| s(ω)`` are 0.95 of 1, beyond ``10ε`` over 0.995)
+and ``‖ū_k‖ ≤ 2ρ |ω̄_k|`` (``ρ`` the contacts' RMS distance from their centroid); beyond that
+the spin model's drag ``κ ‖ṗ_C‖ / |ω|`` would exceed ``μ m g``, the most that Coulomb friction
+at supports within ``ρ`` of the COM can pull, and the load slides, if ``‖ū_k‖ ≥ 3ε_u``. An
+interval in neither (stuck) is left out. The regimes are decided at the starting point, and
+once more near the solution, from which the fit goes on. Without friction
 (``friction=False``, ``heft baseline --no-friction``) the fit is the rigid-body model alone,
 on every interval. (``ω̄_k`` is the mean of the central differences, not ``(θ_k − θ_{k−1})/T``:
 the central differences do not see an angle alternating tick by tick, which the data hardly
@@ -56,8 +64,8 @@ Velocity noise enters the kinematic residuals, force noise the dynamic ones (``�
 problem, and the parameters' standard deviations come from the Jacobian at the solution,
 ``(JᵀJ)⁻¹`` for unit-variance residuals. The starting point comes from the relative
 velocities: ``∫ (v_j − v_1) dt`` runs on a circle centred at ``−(p_Cj − p_C1)`` at the first
-tick (a circle fit, Kåsa's), which gives the contacts' geometry and ``θ_k``; then ``m, κ`` and
-``J, τ_c`` by linear least squares on the dynamics.
+tick (a circle fit, Kåsa's), which gives the contacts' geometry and ``θ_k``; then ``m, κ, F_s``
+and ``J, τ_c`` by linear least squares on the dynamics.
 """
 
 from __future__ import annotations
@@ -73,12 +81,16 @@ MIN_SIGMA_V = 1e-6
 """m/s: the floor of the velocity noise used as a weight (a noise-free run has none)."""
 MIN_SIGMA_F = 1e-4
 """N: the floor of the force noise used as a weight."""
-TURNING_EPSILONS = 3.0
-"""An interval whose ``|ω̄|`` is below this many ``ε`` is left out (see the module docstring)."""
-GRAVITY = 9.81
-"""m/s²: ``g``, for the truth's ``τ_c = μ m g c``."""
+MOVING_EPSILONS = 3.0
+"""The load turns in an interval whose ``|ω̄|`` is at least this many ``ε``, and slides in one
+whose ``‖ū‖`` is at least this many ``ε_u`` (see the module docstring)."""
 MAX_SLIP = 2.0
-"""An interval whose ``‖ū‖ / (ρ |ω̄|)`` is above this is left out (see the module docstring)."""
+"""``‖ū‖ / (ρ |ω̄|)`` at which the load stops turning, as the friction model has it, and
+slides (see the module docstring)."""
+MIN_SLIDING = 20
+"""The fewest intervals of sliding that ``F_s`` is fitted on (fewer are left out)."""
+GRAVITY = 9.81
+"""m/s²: ``g``, for the truth's ``μ m g``."""
 
 
 @dataclass(frozen=True)
@@ -101,15 +113,21 @@ class BaselineFit:
     """``κ`` (N/m): the floor's drag on the COM while the load turns, ``−κ ṗ_C / |ω|``
     (None: fitted without friction)."""
     spin_drag_std: float | None
+    sliding_friction: float | None
+    """``F_s`` (N): the floor's friction on the load while it slides without turning, ``μ m g``
+    against the COM's velocity (None: fitted without friction, or the load never slid)."""
+    sliding_friction_std: float | None
     velocity_noise: float
     """σ_v (m/s) that weighted the velocities."""
     force_noise: float
     """σ_f (N) that weighted the forces."""
     ticks: int
     """How many ticks were fitted."""
-    intervals: int
-    """Of the ``ticks − 1`` intervals between them, how many the dynamics were fitted on
-    (:func:`turning`; all of them without friction)."""
+    turning_intervals: int
+    """Of the ``ticks − 1`` intervals between them, how many the load turned in (all of them
+    without friction; :func:`regimes`)."""
+    sliding_intervals: int
+    """How many it slid in, whose translation was fitted with ``F_s`` (:func:`regimes`)."""
     omega_epsilon: float
     """``ε`` (rad/s), the friction model's smoothing of ``sgn ω`` and ``1/|ω|``."""
     first_tick: int
@@ -138,7 +156,8 @@ def fit(
     """Fit ``velocities`` and ``forces`` (``(K + 1, n, 2)`` arrays, ticks ``0..K`` of a run in
     order; ``forces[k]`` applied over ``[t_{k−1}, t_k]``, ``forces[0]`` unused), weighting them
     by the sensors' noise ``velocity_noise`` (m/s) and ``force_noise`` (N) per axis; with the
-    floor's friction (``τ_c``, ``κ``) unless ``friction`` is False.
+    floor's friction (``τ_c``, ``κ``, and ``F_s`` if the load slid) unless ``friction`` is
+    False.
 
     The noise must be given (a sensor's datasheet, the scenario's ``[sensors]``): estimated
     from the residuals of a fit, it comes out low for the forces (the fitted velocities absorb
@@ -169,34 +188,49 @@ def fit(
     return model.result(solution, first_tick)
 
 
-def truth_friction(truth) -> tuple[float | None, float | None]:
-    """The floor's friction torque ``τ_c`` and spin drag ``κ`` (the fit's parameters) in a
-    recorded :class:`~agent.platform.protocol.Truth`: ``(0, 0)`` on a frictionless floor (a
-    truth without Coulomb friction, ``ground_coulomb``); else as the truth derives them
+def truth_friction(truth) -> dict[str, float | None]:
+    """The floor's friction as the fit has it, ``friction_torque`` ``τ_c``, ``spin_drag`` ``κ``
+    and ``sliding_friction`` ``F_s = μ m g``, in a recorded
+    :class:`~agent.platform.protocol.Truth`: 0 on a frictionless floor (a truth without
+    Coulomb friction, ``ground_coulomb``); else as the truth derives ``τ_c`` and ``κ``
     (``friction_torque``, ``spin_drag``), or ``τ_c = μ m g c`` from its friction radius ``c``
     where it does not, None where it gives neither."""
     coulomb = getattr(truth, "ground_coulomb", 0.0)
+    weight = coulomb * GRAVITY * truth.mass
     if not coulomb:
-        return 0.0, 0.0
-    if hasattr(truth, "spin_drag"):
-        return truth.friction_torque, truth.spin_drag
-    radius = getattr(truth, "friction_radius", None)
-    return (None if radius is None else coulomb * GRAVITY * truth.mass * radius), None
+        torque, drag = 0.0, 0.0
+    elif hasattr(truth, "spin_drag"):
+        torque, drag = truth.friction_torque, truth.spin_drag
+    else:
+        radius = getattr(truth, "friction_radius", None)
+        torque, drag = (None if radius is None else weight * radius), None
+    return {"friction_torque": torque, "spin_drag": drag, "sliding_friction": weight}
 
 
-def turning(omega: np.ndarray, speed: np.ndarray, epsilon: float, radius: float) -> np.ndarray:
-    """Which intervals the friction model holds on (see the module docstring): the mean
-    angular velocity ``omega`` (rad/s) at least :data:`TURNING_EPSILONS` ``epsilon``, and the
-    COM's mean speed ``speed`` (m/s) at most :data:`MAX_SLIP` ``radius |omega|``."""
+def regimes(
+    omega: np.ndarray,
+    speed: np.ndarray,
+    epsilon: float,
+    speed_epsilon: float,
+    radius: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which intervals the load turned in and which it slid in, as the friction model has it
+    (see the module docstring), from their mean angular velocity ``omega`` (rad/s) and the
+    COM's mean speed ``speed`` (m/s): turning, ``|ω̄| ≥ 3ε`` and ``‖ū‖ ≤ 2ρ|ω̄|``; sliding,
+    ``‖ū‖ > 2ρ|ω̄|`` and ``‖ū‖ ≥ 3ε_u`` (:data:`MOVING_EPSILONS`, :data:`MAX_SLIP`; ``ε``,
+    ``ε_u``, ``ρ``: ``epsilon``, ``speed_epsilon``, ``radius``)."""
     turn = np.abs(omega)
-    return (turn >= TURNING_EPSILONS * epsilon) & (speed <= MAX_SLIP * radius * turn)
+    slipping = speed > MAX_SLIP * radius * turn
+    turning = (turn >= MOVING_EPSILONS * epsilon) & ~slipping
+    return turning, slipping & (speed >= MOVING_EPSILONS * speed_epsilon)
 
 
 class _Model:
     """The residuals of the fit (see the module docstring) over the unknowns
-    ``x = [m, J, (τ_c, κ), r_1..r_n (2n), θ_1..θ_K, u_0..u_K (2 each)]`` (``τ_c, κ`` with
-    friction), weighted by the sensors' noise ``sigma_v`` and ``sigma_f``; the dynamic
-    residuals of the intervals not :attr:`kept` are 0."""
+    ``x = [m, J, (τ_c, κ, (F_s)), r_1..r_n (2n), θ_1..θ_K, u_0..u_K (2 each)]`` (``τ_c, κ``
+    with friction, ``F_s`` when the load slid), weighted by the sensors' noise ``sigma_v`` and
+    ``sigma_f``; the dynamic residuals of the intervals in no regime the model holds in are 0
+    (:attr:`turning`, :attr:`sliding`)."""
 
     def __init__(
         self,
@@ -210,27 +244,35 @@ class _Model:
         self.v, self.f, self.T = v, f, period_s
         self.sigma_v, self.sigma_f = sigma_v, sigma_f
         self.friction = friction
+        self.slides = False
+        """Whether ``F_s`` is fitted (the load slid over :data:`MIN_SLIDING` intervals)."""
         self.ticks, self.n, _ = v.shape
         self.total_force = f[1:].sum(axis=1)  # (K, 2)
-        n, k1 = self.n, self.ticks
-        self.i_r = 4 if friction else 2
-        self.i_theta = self.i_r + 2 * n  # θ_1..θ_K (θ_0 = 0)
-        self.i_u = self.i_theta + (k1 - 1)
-        self.size = self.i_u + 2 * k1
-        self.kept = np.ones(k1 - 1, dtype=bool)
-        """Per interval ``[t_{k−1}, t_k]`` (at ``k − 1``), whether its dynamics are fitted."""
+        self._layout()
+        self.turning = np.ones(self.ticks - 1, dtype=bool)
+        """Per interval ``[t_{k−1}, t_k]`` (at ``k − 1``), whether the load turned in it."""
+        self.sliding = np.zeros(self.ticks - 1, dtype=bool)
+        """Per interval, whether the load slid in it (counted with :attr:`slides` only)."""
         self.epsilon = 0.0
+        self.speed_epsilon = sigma_v / math.sqrt(self.n)
         self.radius = 0.0
+
+    def _layout(self) -> None:
+        """Where the unknowns are in ``x``."""
+        self.i_r = 2 + (2 + self.slides if self.friction else 0)
+        self.i_theta = self.i_r + 2 * self.n  # θ_1..θ_K (θ_0 = 0)
+        self.i_u = self.i_theta + (self.ticks - 1)
+        self.size = self.i_u + 2 * self.ticks
 
     def unpack(self, x: np.ndarray):
         n = self.n
         m, j = x[0], x[1]
-        tau, kappa = (x[2], x[3]) if self.friction else (0.0, 0.0)
+        friction = x[2 : self.i_r] if self.friction else ()
         r = x[self.i_r : self.i_theta].reshape(n, 2)
         theta = np.concatenate(([0.0], x[self.i_theta : self.i_u]))
         omega = np.gradient(theta, self.T)  # central differences, one-sided at the ends
         u = x[self.i_u :].reshape(self.ticks, 2)
-        return m, j, tau, kappa, r, theta, omega, u
+        return m, j, friction, r, theta, omega, u
 
     def _arms(self, theta: np.ndarray, r: np.ndarray) -> np.ndarray:
         """``R(θ_k) r_i`` for every tick and robot: ``(len(θ), n, 2)``."""
@@ -247,21 +289,34 @@ class _Model:
         """``ω̄_k`` and ``ū_k`` over each interval."""
         return 0.5 * (omega[1:] + omega[:-1]), 0.5 * (u[1:] + u[:-1])
 
+    def _friction_columns(
+        self, turn: np.ndarray, mean_u: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What ``T κ``, ``T F_s`` and ``T τ_c`` multiply in the dynamic residuals: ``ū s(ω̄)``
+        where the load turned, ``ū / √(‖ū‖² + ε_u²)`` where it slid, ``ω̄ s(ω̄)``."""
+        s = 1.0 / np.sqrt(turn * turn + self.epsilon**2)
+        speed = np.sqrt(np.sum(mean_u**2, axis=1) + self.speed_epsilon**2)
+        drag = np.where(self.turning[:, None], mean_u * s[:, None], 0.0)
+        slide = np.where(self.sliding[:, None], mean_u / speed[:, None], 0.0)
+        return drag, slide, turn * s
+
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        m, j, tau, kappa, r, theta, omega, u = self.unpack(x)
+        m, j, friction, r, theta, omega, u = self.unpack(x)
         T, n = self.T, self.n
         perp = _perp(self._arms(theta, r))
         kinematic = (u[:, None, :] + omega[:, None, None] * perp - self.v) / self.sigma_v
         translation = m * np.diff(u, axis=0) - T * self.total_force
         rotation = j * np.diff(omega) - T * self._torques(theta, r)
+        moved = self.turning
         if self.friction:
-            turn, mean_u = self._means(omega, u)
-            s = 1.0 / np.sqrt(turn * turn + self.epsilon**2)
-            translation += (T * kappa) * mean_u * s[:, None]
-            rotation += (T * tau) * turn * s
-        weight = self.kept / (T * self.sigma_f)
-        translation *= (weight / math.sqrt(n))[:, None]
-        rotation *= weight / max(float(np.sqrt(np.sum(r**2))), 1e-3)
+            drag, slide, spin = self._friction_columns(*self._means(omega, u))
+            translation += (T * friction[1]) * drag
+            rotation += (T * friction[0]) * spin
+            if self.slides:
+                translation += (T * friction[2]) * slide
+                moved = moved | self.sliding
+        translation *= (moved / (T * self.sigma_f * math.sqrt(n)))[:, None]
+        rotation *= self.turning / (T * self.sigma_f * max(float(np.sqrt(np.sum(r**2))), 1e-3))
         return np.concatenate((kinematic.ravel(), translation.ravel(), rotation))
 
     def sparsity(self) -> csr_matrix:
@@ -289,7 +344,7 @@ class _Model:
             link(row, self.i_u + 2 * k + b)
         for d in (-1, 0, 1):
             thetas(row, k + d)
-        # translation rows over the intervals k = 1..K: m, u_{k−1}, u_k, (κ, θ_{k−2..k+1})
+        # translation rows over the intervals k = 1..K: m, u_{k−1}, u_k, (κ, F_s, θ_{k−2..k+1})
         base = 2 * n * k1
         k = np.repeat(intervals + 1, 2)
         a = np.tile(np.arange(2), k1 - 1)
@@ -298,7 +353,8 @@ class _Model:
         for d in (-1, 0):
             link(row, self.i_u + 2 * (k + d) + a)
         if self.friction:
-            link(row, np.full_like(row, 3))
+            for c in range(3, self.i_r):
+                link(row, np.full_like(row, c))
             for d in (-2, -1, 0, 1):
                 thetas(row, k + d)
         # rotation rows: J, (τ_c), every r, θ_{k−2..k+1} (ω_k − ω_{k−1})
@@ -318,21 +374,31 @@ class _Model:
         pattern.data[:] = 1  # entries named twice were summed
         return pattern
 
-    def keep(self, x: np.ndarray) -> None:
-        """Keep the intervals the friction model holds on at ``x`` (:func:`turning`)."""
-        _, _, _, _, _, _, omega, u = self.unpack(x)
+    def _classify(self, omega: np.ndarray, u: np.ndarray) -> None:
+        """The intervals where the load turned and where it slid (:func:`regimes`), from the
+        tick states ``omega`` and ``u``; the sliding ones stay as they were if ``F_s`` is
+        fitted and too few are left to determine it."""
         turn, mean_u = self._means(omega, u)
-        kept = turning(turn, np.hypot(*mean_u.T), self.epsilon, self.radius)
-        if np.count_nonzero(kept) < 2:
+        turning, sliding = regimes(
+            turn, np.hypot(*mean_u.T), self.epsilon, self.speed_epsilon, self.radius
+        )
+        if np.count_nonzero(turning) < 2:
             raise ValueError(
                 "the load never turned, and the friction model holds only while it turns"
                 " (fit without friction)"
             )
-        self.kept = kept
+        if self.slides and np.count_nonzero(sliding) < MIN_SLIDING:
+            sliding = self.sliding
+        self.turning, self.sliding = turning, sliding
+
+    def keep(self, x: np.ndarray) -> None:
+        """The intervals in each regime at ``x`` (:meth:`_classify`)."""
+        _, _, _, _, _, omega, u = self.unpack(x)
+        self._classify(omega, u)
 
     def start(self) -> np.ndarray:
         """A starting point from the relative velocities (see the module docstring); with
-        friction, also ``ε``, ``ρ`` and the intervals kept there."""
+        friction, also ``ε``, ``ρ``, the regimes there and whether ``F_s`` is fitted."""
         v, T, n = self.v, self.T, self.n
         # Each robot's position relative to robot 1, up to a constant: ∫ (v_j − v_1) dt.
         rel = np.cumsum(np.concatenate((np.zeros((1, n, 2)), 0.5 * T * (v[1:] + v[:-1]))), axis=0)
@@ -350,31 +416,34 @@ class _Model:
         spread = float(np.sum(r**2))  # Σ ‖r_i − r̄‖²
         self.epsilon = self.sigma_v / math.sqrt(max(spread, 1e-12))
         self.radius = math.sqrt(spread / n)
-        parameters = [0.0] * (4 if self.friction else 2)
-        x = np.concatenate((parameters, r.ravel(), theta[1:], u.ravel()))
         if self.friction:
-            self.keep(x)
-        kept = self.kept
-        # m (and κ), J (and τ_c): linear least squares on the dynamics of the kept intervals
+            self._classify(omega, u)
+            self.slides = np.count_nonzero(self.sliding) >= MIN_SLIDING
+            self._layout()
+        # m (and κ, F_s), J (and τ_c): linear least squares on the dynamics where they hold
+        moved = self.turning | self.sliding if self.slides else self.turning
         turn, mean_u = self._means(omega, u)
-        s = 1.0 / np.sqrt(turn[kept] ** 2 + self.epsilon**2)
-        columns = [np.diff(u, axis=0)[kept].ravel()]
+        columns = [np.diff(u, axis=0)[moved].ravel()]
+        drag, slide, spin = self._friction_columns(turn, mean_u)
         if self.friction:
-            columns.append(T * (mean_u[kept] * s[:, None]).ravel())
-        mass = _least_squares(columns, (T * self.total_force[kept]).ravel())
+            columns.append(T * drag[moved].ravel())
+            if self.slides:
+                columns.append(T * slide[moved].ravel())
+        mass = _least_squares(columns, (T * self.total_force[moved]).ravel())
+        kept = self.turning
         columns = [np.diff(omega)[kept]]
         if self.friction:
-            columns.append(T * turn[kept] * s)
+            columns.append(T * spin[kept])
         inertia = _least_squares(columns, T * self._torques(theta, r)[kept])
-        x[0], x[1] = max(mass[0], 1e-3), max(inertia[0], 1e-4)
+        parameters = [max(mass[0], 1e-3), max(inertia[0], 1e-4)]
         if self.friction:
-            x[2], x[3] = inertia[1], mass[1]
-        return x
+            parameters += [inertia[1], *mass[1:]]
+        return np.concatenate((parameters, r.ravel(), theta[1:], u.ravel()))
 
     def _parameter_covariance(self, jac) -> np.ndarray:
-        """The covariance of the constants (``m, J, (τ_c, κ), r_1..r_n``) with the states
-        marginalised: the leading block of ``(JᵀJ)⁻¹`` (residuals of unit variance), from a
-        sparse factorisation."""
+        """The covariance of the constants (``m, J, (τ_c, κ, (F_s)), r_1..r_n``) with the
+        states marginalised: the leading block of ``(JᵀJ)⁻¹`` (residuals of unit variance),
+        from a sparse factorisation."""
         count = self.i_theta
         try:
             factor = splu((jac.T @ jac).tocsc())
@@ -385,7 +454,7 @@ class _Model:
             return np.full((count, count), np.nan)
 
     def result(self, solution, first_tick: int) -> BaselineFit:
-        m, j, tau, kappa, r, theta, _, _ = self.unpack(solution.x)
+        m, j, friction, r, theta, _, _ = self.unpack(solution.x)
         covariance = self._parameter_covariance(solution.jac)
         last = self._arms(theta[-1:], r)[0]
         c, s = math.cos(theta[-1]), math.sin(theta[-1])
@@ -401,6 +470,13 @@ class _Model:
             variance = covariance[index, index]
             return float(np.sqrt(variance)) if variance >= 0 else math.nan
 
+        def fitted(index: int) -> tuple[float | None, float | None]:
+            """The friction parameter at ``index`` and its std (None: not fitted)."""
+            if index >= self.i_r:
+                return None, None
+            return float(solution.x[index]), std(index)
+
+        (torque, torque_std), (drag, drag_std), (slide, slide_std) = map(fitted, (2, 3, 4))
         return BaselineFit(
             mass=float(m),
             moment=float(j),
@@ -408,14 +484,17 @@ class _Model:
             mass_std=std(0),
             moment_std=std(1),
             contact_to_com_std=tuple(stds),
-            friction_torque=float(tau) if self.friction else None,
-            friction_torque_std=std(2) if self.friction else None,
-            spin_drag=float(kappa) if self.friction else None,
-            spin_drag_std=std(3) if self.friction else None,
+            friction_torque=torque,
+            friction_torque_std=torque_std,
+            spin_drag=drag,
+            spin_drag_std=drag_std,
+            sliding_friction=slide,
+            sliding_friction_std=slide_std,
             velocity_noise=self.sigma_v,
             force_noise=self.sigma_f,
             ticks=self.ticks,
-            intervals=int(np.count_nonzero(self.kept)),
+            turning_intervals=int(np.count_nonzero(self.turning)),
+            sliding_intervals=int(np.count_nonzero(self.sliding)) if self.slides else 0,
             omega_epsilon=self.epsilon,
             first_tick=first_tick,
             angle=float(theta[-1]),

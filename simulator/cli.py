@@ -765,13 +765,14 @@ def _add_baseline(commands: argparse._SubParsersAction) -> None:
         formatter_class=HelpFormatter,
         description=(
             "Fit the load's mass, moment of inertia, every contact's offset to the COM and the\n"
-            "floor's friction (a torque tau_c against the turn, a drag kappa v/|omega| on the\n"
-            "COM) to all robots' recorded measurements at once (simulator/baseline.py: a batch\n"
-            "least-squares fit of the rigid-body model over the longest stretch of ticks at\n"
-            "which every robot was measured; the friction model holds while the load turns,\n"
-            "and the intervals where it barely does are left out), with standard deviations;\n"
-            "print them against the recorded truth, when there is one. The yardstick of the\n"
-            "distributed estimators: what one computer that saw everything could reach.\n\n"
+            "floor's friction (while the load turns, a torque tau_c against the turn and a drag\n"
+            "kappa v/|omega| on the COM; while it slides without turning, F_s = mu m g against\n"
+            "its motion) to all robots' recorded measurements at once (simulator/baseline.py:\n"
+            "a batch least-squares fit of the rigid-body model over the longest stretch of\n"
+            "ticks at which every robot was measured; the intervals where the load barely moves\n"
+            "are left out), with standard deviations; print them against the recorded truth,\n"
+            "when there is one. The yardstick of the distributed estimators: what one computer\n"
+            "that saw everything could reach.\n\n"
             "Exit status: 0 fitted, 1 the fit did not converge, 2 bad recording or arguments."
         ),
         epilog=(
@@ -840,12 +841,13 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise UsageError(f"{args.recording}: {err}") from None
     truth = run.truth
-    friction = (None, None) if truth is None else truth_friction(truth)
+    friction = {} if truth is None else truth_friction(truth)
     model = (
         "without friction (--no-friction)"
         if result.friction_torque is None
-        else f"friction on {result.intervals} of {result.ticks - 1} intervals (the load turning:"
-        f" |ω| ≥ 3ε, ε = {result.omega_epsilon:.2g} rad/s)"
+        else f"friction: turning in {result.turning_intervals}, sliding in"
+        f" {result.sliding_intervals} of {result.ticks - 1} intervals (ε = "
+        f"{result.omega_epsilon:.2g} rad/s)"
     )
     lines = [
         f"baseline of {args.recording}: {result.ticks} ticks, the load turned"
@@ -858,11 +860,14 @@ def cmd_baseline(args: argparse.Namespace) -> int:
         ("m [kg]", result.mass, result.mass_std, None if truth is None else truth.mass),
         ("J [kg m2]", result.moment, result.moment_std, None if truth is None else truth.moment),
     ]
-    if result.friction_torque is not None:
-        rows += [
-            ("τ_c [N m]", result.friction_torque, result.friction_torque_std, friction[0]),
-            ("κ [N/m]", result.spin_drag, result.spin_drag_std, friction[1]),
-        ]
+    for label, key in (
+        ("τ_c [N m]", "friction_torque"),
+        ("κ [N/m]", "spin_drag"),
+        ("F_s [N]", "sliding_friction"),
+    ):
+        value = getattr(result, key)
+        if value is not None:
+            rows.append((label, value, getattr(result, key + "_std"), friction.get(key)))
     for label, value, std, true in rows:
         if true is None:
             error = "-"
@@ -885,7 +890,7 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     if result.friction_torque is not None:
         lines.append(
             "(τ_c: the floor's friction torque about the COM while the load turns; κ: its drag"
-            " on the COM, -κ v/|ω|)"
+            " on the COM then, -κ v/|ω|; F_s: its friction while the load slides, μ m g)"
         )
     print("\n".join(lines))
     if args.out:
@@ -893,7 +898,7 @@ def cmd_baseline(args: argparse.Namespace) -> int:
         if truth is not None:
             true = {"tick": truth.tick, "mass": truth.mass, "moment": truth.moment}
             true["contact_to_com"] = [list(c) for c in truth.contact_to_com]
-            true["friction_torque"], true["spin_drag"] = friction
+            true.update(friction)
         data = {
             "recording": str(args.recording),
             "period_s": run.period_s,

@@ -96,10 +96,15 @@ for half of its 1 s flip, so that ω swings about the turn the load had; speedin
 compact light load (``J`` of 1.6 kg m² under 7 robots) turned at up to 2.75 rad/s, beyond its
 floor's 2 rad/s (``heft bench noise --generated 20`` gives the largest ``|ω|`` over its runs,
 and how many kept to their floor)."""
-FRICTION_KEYS = ("friction_torque_Nm", "spin_drag_N_m")
-"""The baseline's friction errors (:func:`baseline_errors`): ``|τ̂_c − τ_c|`` (N m) and
-``|κ̂ − κ|`` (N/m), against the truth's (:func:`~simulator.baseline.truth_friction`; 0 on a
-frictionless floor)."""
+FRICTION_KEYS = {
+    "friction_torque_Nm": "friction_torque",
+    "spin_drag_N_m": "spin_drag",
+    "sliding_friction_N": "sliding_friction",
+}
+"""The baseline's friction errors (:func:`baseline_errors`), ``|τ̂_c − τ_c|`` (N m),
+``|κ̂ − κ|`` (N/m) and ``|F̂_s − μ m g|`` (N) against the truth's
+(:func:`~simulator.baseline.truth_friction`; 0 on a frictionless floor), and the parameter
+each is of."""
 SWEEP = (0.0, 0.001, 0.003, 0.01, 0.03)
 """σ_v (m/s) of the sweep; σ_f = 50 σ_v."""
 
@@ -276,20 +281,17 @@ def baseline_errors(outcome: RunOutcome, found: BaselineFit | None) -> dict[str,
         for i, neighbours in graph.items()
     }
     true = truth_friction(truth)
-    fitted_friction = (found.friction_torque, found.spin_drag)
-    return {
-        **team_errors(fitted, truth, graph),
-        **{
-            key: None if a is None or b is None else abs(a - b)
-            for key, a, b in zip(FRICTION_KEYS, fitted_friction, true, strict=True)
-        },
-    }
+    errors = team_errors(fitted, truth, graph)
+    for key, name in FRICTION_KEYS.items():
+        value, exact = getattr(found, name), true[name]
+        errors[key] = None if value is None or exact is None else abs(value - exact)
+    return errors
 
 
 def baseline_friction(found: BaselineFit | None) -> dict[str, float | None]:
     """The batch fit's friction parameters and their standard deviations (``None``: the fit
     failed)."""
-    keys = ("friction_torque", "friction_torque_std", "spin_drag", "spin_drag_std")
+    keys = [key + end for key in FRICTION_KEYS.values() for end in ("", "_std")]
     return {key: None if found is None else getattr(found, key) for key in keys}
 
 

@@ -72,8 +72,9 @@ def test_without_noise_the_fit_is_the_load() -> None:
     )
     # no friction, to the same O(T²): a caster floor's would be about 1 N m and 0.4 N/m
     assert abs(result.friction_torque) < 2e-3 and abs(result.spin_drag) < 1e-3
-    # the sines drive the load across ω = 0: those intervals' dynamics are left out
-    assert 0.5 * result.ticks < result.intervals < result.ticks - 1
+    # the sines drive the load across ω = 0: there it slides, against no friction either
+    assert 0.5 * result.ticks < result.turning_intervals < result.ticks - 1
+    assert result.sliding_intervals > 20 and abs(result.sliding_friction) < 1e-3
 
 
 def test_with_noise_the_truth_is_within_the_fits_own_uncertainty() -> None:
@@ -86,6 +87,7 @@ def test_with_noise_the_truth_is_within_the_fits_own_uncertainty() -> None:
     assert abs(result.moment - truth.moment) < 4 * result.moment_std
     assert abs(result.friction_torque) < 4 * result.friction_torque_std
     assert abs(result.spin_drag) < 4 * result.spin_drag_std
+    assert abs(result.sliding_friction) < 4 * result.sliding_friction_std
     for fitted, std, true in zip(
         result.contact_to_com, result.contact_to_com_std, truth.contact_to_com, strict=True
     ):
@@ -119,11 +121,13 @@ def test_heft_baseline_reads_a_recording_and_prints_the_fit_against_the_truth(
     assert data["truth"]["contact_to_com"] == [list(c) for c in truth.contact_to_com]
     assert abs(data["friction_torque"]) < 2e-3 and data["friction_torque_std"] > 0
     assert data["truth"]["friction_torque"] == data["truth"]["spin_drag"] == 0.0
+    assert data["truth"]["sliding_friction"] == 0.0 and "F_s [N]" in printed
     # the rigid-body model alone: every interval, no friction
     assert main(["baseline", str(path), *noise, "--no-friction", "--out", str(out)]) == 0
     assert "without friction" in capsys.readouterr().out
     rigid = json.loads(out.read_text())
-    assert rigid["friction_torque"] is None and rigid["intervals"] == rigid["ticks"] - 1
+    assert rigid["friction_torque"] is None and rigid["sliding_friction"] is None
+    assert rigid["turning_intervals"] == rigid["ticks"] - 1 and rigid["sliding_intervals"] == 0
     assert abs(rigid["mass"] - truth.mass) / truth.mass < 1e-4
 
 

@@ -1,8 +1,8 @@
 """The centralized reference's friction (simulator/baseline.py): on a load that spins on a
 floor with the robots' friction model (a torque ``−τ_c sgn ω``, a drag ``−κ ṗ_C / |ω|``) the fit
 finds ``τ_c`` and ``κ`` with ``m``, ``J`` and the arms, each within its own uncertainty; on a
-frictionless floor it finds no friction; intervals where the load slides more than it turns,
-whose friction the model does not describe, are left out."""
+frictionless floor it finds no friction; where the load slides without turning, it finds the
+Coulomb friction ``μ m g`` that the spin model cannot describe there."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from simulator.baseline import GRAVITY, fit, truth_friction, turning
+from simulator.baseline import GRAVITY, fit, regimes, truth_friction
 
 MASS, MOMENT = 5.0, 12.3795
 ARMS = np.array([[-2.0, 0.54], [-1.0, -0.86], [1.2, -0.86], [2.0, 0.74]])
@@ -109,7 +109,8 @@ def offsets_at(angle: float) -> np.ndarray:
 def test_noise_free_the_fit_is_the_floor_and_the_load() -> None:
     v, f = spinning_run(12.0)
     result = fit(v, f, PERIOD, 0.0, 0.0)
-    assert result.converged and result.intervals == result.ticks - 1
+    assert result.converged and result.turning_intervals == result.ticks - 1
+    assert result.sliding_intervals == 0 and result.sliding_friction is None
     assert result.friction_torque == pytest.approx(FRICTION_TORQUE, rel=2e-3)
     assert result.spin_drag == pytest.approx(SPIN_DRAG, rel=2e-3)
     assert result.mass == pytest.approx(MASS, rel=1e-4)
@@ -151,25 +152,32 @@ def test_on_a_frictionless_floor_it_finds_no_friction() -> None:
     assert result.mass_std < 1.2 * rigid.mass_std and result.moment_std < 1.2 * rigid.moment_std
 
 
-def test_a_load_that_slides_without_turning_is_left_out() -> None:
+def test_where_the_load_slides_without_turning_it_meets_coulomb_friction() -> None:
     """For its first 3 s the load does not turn: the push slides it against ``μ m g``, which
-    the friction model cannot describe. Those intervals are left out, and the rest finds the
-    floor; fitted on all of them, the drag would not be the floor's."""
+    the spin model cannot describe. Those intervals' translation is fitted with ``F_s``, and
+    the rest finds the floor; fitted on all of them with the spin model, the drag would not
+    be the floor's, and without them the mass would lose the push."""
     v, f = spinning_run(16.0, velocity_noise=0.01, force_noise=0.5, slide_s=3.0)
     result = fit(v, f, PERIOD, 0.01, 0.5)
     assert result.converged
-    assert result.ticks - 1 - result.intervals >= 300  # at least the 3 s of sliding
-    assert abs(result.friction_torque - FRICTION_TORQUE) < 4 * result.friction_torque_std
-    assert abs(result.spin_drag - SPIN_DRAG) < 4 * result.spin_drag_std
-    assert abs(result.mass - MASS) < 4 * result.mass_std
+    assert 280 <= result.sliding_intervals <= result.ticks - 1 - result.turning_intervals
+    for value, std, true in (
+        (result.sliding_friction, result.sliding_friction_std, COULOMB_LIMIT),
+        (result.friction_torque, result.friction_torque_std, FRICTION_TORQUE),
+        (result.spin_drag, result.spin_drag_std, SPIN_DRAG),
+        (result.mass, result.mass_std, MASS),
+    ):
+        assert abs(value - true) < 4 * std, (value, std, true)
+    assert result.sliding_friction_std < 0.1 * COULOMB_LIMIT
 
 
-def test_turning_keeps_the_intervals_the_model_holds_on() -> None:
-    omega = np.array([0.0, 0.005, -0.05, 0.5, -0.5, 0.5])
-    speed = np.array([0.0, 0.0, 0.01, 0.5, 1.9, 2.1])
-    kept = turning(omega, speed, epsilon=0.002, radius=2.0)
-    # stuck; below 3ε; turning; turning; sliding within 2ρ|ω|; sliding beyond it
-    assert kept.tolist() == [False, False, True, True, True, False]
+def test_the_regimes_are_where_each_model_holds() -> None:
+    omega = np.array([0.0, 0.005, -0.05, 0.5, -0.5, 0.5, 0.0, 0.0])
+    speed = np.array([0.0, 0.0, 0.01, 0.5, 1.9, 2.1, 0.005, 0.5])
+    turning, sliding = regimes(omega, speed, epsilon=0.002, speed_epsilon=0.005, radius=2.0)
+    # stuck; below 3ε; turning; turning; within 2ρ|ω|; beyond it; below 3ε_u; beyond it
+    assert turning.tolist() == [False, False, True, True, True, False, False, False]
+    assert sliding.tolist() == [False, False, False, False, False, True, False, True]
 
 
 def test_a_load_that_never_turns_is_refused() -> None:
@@ -179,9 +187,19 @@ def test_a_load_that_never_turns_is_refused() -> None:
 
 
 def test_the_truths_friction_is_what_the_fit_is_compared_with() -> None:
-    assert truth_friction(SimpleNamespace(mass=5.0)) == (0.0, 0.0)  # no floor: frictionless
-    assert truth_friction(SimpleNamespace(mass=5.0, ground_coulomb=0.0)) == (0.0, 0.0)
+    none = {"friction_torque": 0.0, "spin_drag": 0.0, "sliding_friction": 0.0}
+    assert truth_friction(SimpleNamespace(mass=5.0)) == none  # no floor: frictionless
+    assert truth_friction(SimpleNamespace(mass=5.0, ground_coulomb=0.0)) == none
+    weight = 0.02 * GRAVITY * 5.0
     floor = SimpleNamespace(mass=5.0, ground_coulomb=0.02, friction_torque=1.2, spin_drag=0.4)
-    assert truth_friction(floor) == (1.2, 0.4)
+    assert truth_friction(floor) == {
+        "friction_torque": 1.2,
+        "spin_drag": 0.4,
+        "sliding_friction": pytest.approx(weight),
+    }
     radius_only = SimpleNamespace(mass=5.0, ground_coulomb=0.02, friction_radius=1.2)
-    assert truth_friction(radius_only) == (pytest.approx(0.02 * GRAVITY * 5.0 * 1.2), None)
+    assert truth_friction(radius_only) == {
+        "friction_torque": pytest.approx(weight * 1.2),
+        "spin_drag": None,
+        "sliding_friction": pytest.approx(weight),
+    }
