@@ -6,13 +6,15 @@
                             registry into ``dashboard/node_modules`` by ``make`` (no CDN:
                             robots run offline)
 ``GET /api/snapshot``       the latest state: per robot phase, m̂, Ĵ, ``contact_to_com``,
-                            ``relative_positions``; each link's health; the truth if known
+                            ``relative_positions`` and their uncertainties; each link's
+                            health; the truth if known
 ``GET /api/summary``        the final table of estimates against truth (404 before)
 ``GET /api/series``         every chart's kept points
 ``POST /api/replay``        steer a replay: ``{"action": "play"|"pause"|"step"|"restart",
                             "speed": X}``
-``WS /ws``                  a ``hello`` (charts and scene), then ``frame``\\ s at
-                            ``frame_hz``: the charts' new points and the scene
+``WS /ws``                  a ``hello`` (the estimated scalars, charts and scene), then
+                            ``frame``\\ s at ``frame_hz``: the charts' new points (with
+                            their 95 % half-widths) and the scene
 ========================== ==============================================================
 
 Frames are built once per period for every page, only when something changed (or every

@@ -179,9 +179,11 @@ def _add_dashboard(commands: argparse._SubParsersAction) -> None:
         formatter_class=HelpFormatter,
         description=(
             "Serve a web page that shows a team live over Zenoh, or a recording replayed:\n"
-            "every robot's m and J against the truth, the edges' |z_ij|, the COM offset, the\n"
-            "rotation rate, the phase timeline, the communication graph's health, a top view\n"
-            "of the load (its outline as the plant publishes it), alarms and the final table.\n"
+            "every robot's m and J against the truth, the edges' |z_ij|, each robot's distance\n"
+            "to the COM (each with the 95 % band the robot publishes), the rotation rate, the\n"
+            "phase timeline, the communication graph's health, a top view of the load (its\n"
+            "outline as the plant publishes it), alarms and the final table (with the 95 %\n"
+            "intervals).\n"
             "Prints 'dashboard: URL' once serving.\n\n"
             "It listens on 127.0.0.1 unless told otherwise; any other address needs a token,\n"
             f"given with --token or ${TOKEN_ENV}, on every request (header\n"

@@ -22,6 +22,7 @@ from agent.platform.protocol import (
     Status,
     Truth,
 )
+from dashboard.quantities import DECLARATIONS
 from dashboard.replay import Recorded, Recording, Replayer
 from dashboard.state import CAPACITY, TeamState
 
@@ -130,7 +131,9 @@ class Hub:
         return frame
 
     def hello(self) -> dict:
-        """What a page gets first: every chart's kept points and the scene."""
+        """What a page gets first: the estimated scalars it charts and tabulates
+        (:data:`~dashboard.quantities.DECLARATIONS`), every chart's kept points and the
+        scene."""
         now = self.now()
         with self.lock:
             series = self.state.all_series()
@@ -138,6 +141,7 @@ class Hub:
         return {
             "type": "hello",
             "epoch": self.epoch,
+            "scalars": DECLARATIONS,
             "series": series,
             "scene": scene,
             "source": self.source(),

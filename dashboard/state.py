@@ -12,10 +12,15 @@ Names follow the paper: ``m̂`` (``mass``), ``Ĵ`` (``moment``, about the COM), 
 p_Cj`` (``relative_positions``), ``z_C = p_G − p_C`` (``com_offset``), ``ω`` (``omega``),
 ``p_C − p_Ci`` (``contact_to_com``).
 
-Chart traces are named ``QUANTITY/ROBOT``: ``mass/2``, ``moment/2``, ``omega/2``, ``com/2``
-(``‖ẑ_C‖`` as robot 2 knows it), ``edge/1-2`` (``‖ẑ_12‖`` as robot 1 knows it); the truth's
-are ``mass/truth``, ``moment/truth``, ``omega/truth``, ``com/truth`` and ``edge/1-2/truth``.
-Each point is ``[t, value]``, ``t`` in simulated seconds (tick × period).
+Chart traces are named ``QUANTITY/ROBOT``: one per scalar of :data:`~dashboard.quantities.
+SCALARS` (``mass/2``, ``moment/2``), ``omega/2``, ``ctc/2`` (``‖p̂_C − p_C2‖``, robot 2's
+distance from its contact to the COM), ``edge/1-2`` (``‖ẑ_12‖`` as robot 1 knows it); the
+truth's are ``mass/truth``, ``moment/truth``, ``omega/truth``, ``ctc/2/truth`` and
+``edge/1-2/truth``. Each point is ``[t, value]``, ``t`` in simulated seconds (tick × period),
+or ``[t, value, h]`` when the robot published an uncertainty of it: ``value ± h`` is its 95 %
+interval (``h = 1.96 σ``; for the norms ``‖v̂‖``, ``σ² = ûᵀ C û`` with ``û = v̂ / ‖v̂‖`` and
+``C`` the vector's covariance, to first order). An uncertainty that is not one (non-finite,
+negative, not a covariance) is dropped: that point has no ``h``.
 """
 
 from __future__ import annotations
@@ -25,7 +30,17 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 
 from agent.platform.config import MAX_ROBOTS
-from agent.platform.evaluation import final_instant, robot_errors
+from agent.platform.evaluation import (
+    PLANAR_95,
+    SCALAR_95,
+    covariance,
+    edges_interval,
+    final_instant,
+    planar_interval,
+    robot_errors,
+    scalar_interval,
+    standard_deviation,
+)
 from agent.platform.protocol import (
     BridgeStatus,
     Clock,
@@ -40,6 +55,7 @@ from agent.platform.protocol import (
     Status,
     Truth,
 )
+from dashboard.quantities import SCALARS
 
 CAPACITY = 3000
 """Points kept per chart trace (at the 20 Hz frame rate, 2.5 minutes of a live run)."""
@@ -65,6 +81,36 @@ _PHASES = [p.label for p in Phase]
 
 def _norm(v) -> float | None:
     return None if v is None else math.hypot(v[0], v[1])
+
+
+def _norm_half(v, cov) -> float | None:
+    """The 95 % half-width of ``‖v‖`` for ``v`` of covariance ``cov``: ``1.96 σ`` with
+    ``σ² = ûᵀ C û`` (``û = v / ‖v‖``); None without a covariance (:func:`~agent.platform.
+    evaluation.covariance`) or a direction."""
+    cov = covariance(cov)
+    norm = _norm(v)
+    if cov is None or not norm or not math.isfinite(norm):
+        return None
+    ux, uy = v[0] / norm, v[1] / norm
+    xx, xy, yy = cov
+    half = SCALAR_95 * math.sqrt(max(ux * ux * xx + 2.0 * ux * uy * xy + uy * uy * yy, 0.0))
+    return half if math.isfinite(half) else None
+
+
+def _ellipse(cov) -> list[float] | None:
+    """The 95 % ellipse of a planar estimate of covariance ``cov`` (``eᵀ C⁻¹ e ≤ 5.99``):
+    ``[major semi-axis, minor semi-axis, angle of the major axis]`` (m, m, rad), or None
+    without a covariance."""
+    cov = covariance(cov)
+    if cov is None:
+        return None
+    xx, xy, yy = cov
+    mean, radius = 0.5 * (xx + yy), math.hypot(0.5 * (xx - yy), xy)
+    k = math.sqrt(PLANAR_95)
+    axes = [k * math.sqrt(mean + radius), k * math.sqrt(max(mean - radius, 0.0))]
+    if not all(map(math.isfinite, axes)):
+        return None
+    return [*axes, 0.5 * math.atan2(2.0 * xy, xx - yy)]
 
 
 def _round(value, digits: int = 6):
@@ -344,24 +390,29 @@ class TeamState:
         """Each robot's estimates against ``truth`` (when known): m̂, Ĵ, ``p_C − p_Ci``,
         ``ẑ_C`` and their errors (:func:`~agent.platform.evaluation.robot_errors`: relative,
         metres and rad/s, ``relative_positions_m`` over the neighbours its estimates name),
-        and the worst of each over the robots that have one."""
+        the 95 % intervals of each of :data:`~dashboard.quantities.SCALARS`, of
+        ``p_C − p_Ci`` and of the ``ẑ_ij`` as ``[half-width, truth inside]`` (the inside
+        None without the truth; both None without an uncertainty:
+        :mod:`agent.platform.evaluation`), and the worst of each error over the robots that
+        have one."""
         rows = {}
         worst: dict[str, float] = {}
         for i, est in sorted(robots.items()):
+            judged = truth if truth is not None and i <= len(truth.contacts) else None
             row = {
                 "phase": est.phase.label,
                 "load_changes": est.load_changes,
                 "rejoins": est.rejoins,
                 "change_score": est.change_score,
                 "tick": est.tick,
-                "mass": est.mass,
-                "moment": est.moment,
+                **{s.key: getattr(est, s.key) for s in SCALARS},
                 "contact_to_com": est.contact_to_com,
                 "com_offset": est.com_offset,
                 "omega": est.omega,
                 "relative_positions": _by_neighbour(est),
+                "intervals": _intervals(est, judged),
             }
-            if truth is not None and i <= len(truth.contacts):
+            if judged is not None:
                 known = [j for j in est.relative_positions if 1 <= j <= len(truth.contacts)]
                 errors = robot_errors(est, truth, known)
                 row["errors"] = errors
@@ -387,13 +438,17 @@ class TeamState:
         return row
 
     # ------------------------------------------------------------------ frames
-    def _add(self, trace: str, tick: int, value) -> None:
+    def _add(self, trace: str, tick: int, value, half: float | None = None) -> None:
+        """A point of ``trace``: ``value`` at ``tick``, with its 95 % half-width ``half`` when
+        it has one (see the module docstring)."""
         if value is None or not math.isfinite(value):
             return
         points = self.series.get(trace)
         if points is None:
             points = self.series[trace] = deque(maxlen=self.capacity)
         point = [self.t(tick), round(value, 9)]
+        if half is not None and math.isfinite(value - half) and math.isfinite(value + half):
+            point.append(round(half, 9))
         points.append(point)
         fresh = self._fresh.get(trace)
         if fresh is None:
@@ -413,24 +468,30 @@ class TeamState:
             return
         view.sampled_tick = est.tick
         i, k = est.robot, max(est.tick, 0)
-        self._add(f"mass/{i}", k, est.mass)
-        self._add(f"moment/{i}", k, est.moment)
+        for s in SCALARS:
+            value = getattr(est, s.key)
+            half, _ = scalar_interval(value, getattr(est, s.std), None)
+            self._add(f"{s.key}/{i}", k, value, half)
         self._add(f"omega/{i}", k, est.omega)
-        self._add(f"com/{i}", k, _norm(est.com_offset))
+        ctc = est.contact_to_com
+        self._add(f"ctc/{i}", k, _norm(ctc), _norm_half(ctc, est.contact_to_com_cov))
+        covs = est.relative_positions_cov
         for j, z in est.relative_positions.items():
             if j > i:
-                self._add(f"edge/{i}-{j}", k, _norm(z))
+                self._add(f"edge/{i}-{j}", k, _norm(z), _norm_half(z, covs.get(j)))
 
     def _plot_truth(self, truth: Truth) -> None:
-        """The truth beside the estimates: ``ω``, and the constants m, J, ``‖z_C‖`` and each
-        edge's ``‖z_ij‖`` as lines (so that a chart's range always holds the truth)."""
+        """The truth beside the estimates: ``ω``, and the constants m, J (each of
+        :data:`~dashboard.quantities.SCALARS` the truth has), each robot's ``‖p_C − p_Ci‖`` and
+        each edge's ``‖z_ij‖`` as lines (so that a chart's range always holds the truth)."""
         if truth.tick < self.truth_sampled + self._stride():
             return
         self.truth_sampled = k = truth.tick
         self._add("omega/truth", k, truth.omega)
-        self._add("mass/truth", k, truth.mass)
-        self._add("moment/truth", k, truth.moment)
-        self._add("com/truth", k, _norm(truth.com_offset))
+        for s in SCALARS:
+            self._add(f"{s.key}/truth", k, getattr(truth, s.truth, None))
+        for i, ctc in enumerate(truth.contact_to_com, start=1):
+            self._add(f"ctc/{i}/truth", k, _norm(ctc))
         contacts = truth.contacts
         for i, j in self.edges():
             if j <= len(contacts):
@@ -543,7 +604,8 @@ class TeamState:
         return alarms
 
     def top_view(self) -> dict | None:
-        """The load seen from above: outline, contacts, true and estimated COM, forces.
+        """The load seen from above: outline, contacts, true and estimated COM (with the 95 %
+        ellipse of each robot's ``p̂_C − p_Ci``, when it published its covariance), forces.
 
         With the truth, in ``W``; without it, the team's own geometry about ``p_G``
         (contacts at ``ẑ_i``, COM at ``−ẑ_C``), so the view works on real robots too."""
@@ -564,7 +626,7 @@ class TeamState:
                 est = self.robots.get(i) and self.robots[i].estimates
                 contacts.append(list(est.centroid_offset) if est and est.centroid_offset else None)
             com, outline, source = None, None, "estimates"
-        com_estimates, forces = {}, {}
+        com_estimates, ellipses, forces = {}, {}, {}
         for i in range(1, n + 1):
             view = self.robots.get(i)
             if view is None:
@@ -577,6 +639,9 @@ class TeamState:
                     com_estimates[str(i)] = [contact[0] + c[0], contact[1] + c[1]]
                 elif source == "estimates" and est.com_offset is not None:
                     com_estimates[str(i)] = [-est.com_offset[0], -est.com_offset[1]]
+                ellipse = _ellipse(est.contact_to_com_cov)
+                if str(i) in com_estimates and ellipse is not None:
+                    ellipses[str(i)] = ellipse
             if view.command is not None:
                 forces[str(i)] = list(view.command.force)
         if not contacts and not com_estimates:
@@ -587,6 +652,7 @@ class TeamState:
             "contacts": _round(contacts),
             "com": _round(com),
             "com_estimates": _round(com_estimates),
+            "com_ellipses": _round(ellipses),
             "forces": _round(forces),
             "angle": None if truth is None else round(truth.angle, 6),
         }
@@ -599,8 +665,8 @@ class TeamState:
             robots[str(i)] = {
                 "phase": None if est is None else est.phase.label,
                 "tick": None if est is None else est.tick,
-                "mass": None if est is None else est.mass,
-                "moment": None if est is None else est.moment,
+                **{s.key: None if est is None else getattr(est, s.key) for s in SCALARS},
+                **_uncertainty(est),
                 "omega": None if est is None else est.omega,
                 "contact_to_com": None if est is None else est.contact_to_com,
                 "com_offset": None if est is None else est.com_offset,
@@ -662,8 +728,9 @@ class TeamState:
     def page_scene(self, now: float) -> dict:
         """The scene as the page draws it (its frames carry it ~20 times a second): what
         :meth:`scene` holds, less what the page does not show (per robot only its phase, tick,
-        segments and liveliness; the table's rows without ω, ``ẑ_C`` and ``ẑ_ij``, and of
-        their errors those of m̂, Ĵ, ``p_C − p_Ci`` and ``ẑ_ij`` only)."""
+        segments and liveliness; the table's rows without ω, ``ẑ_C`` and ``ẑ_ij``, of their
+        errors those of m̂, Ĵ, ``p_C − p_Ci`` and ``ẑ_ij`` only, and of their intervals those
+        published)."""
         scene = self.scene(now)
         scene["robots"] = {
             i: {key: view[key] for key in _PAGE_ROBOT} for i, view in scene["robots"].items()
@@ -674,7 +741,7 @@ class TeamState:
             "final": table["final"],
             "t": table["t"],
             "robots": {i: _page_row(row) for i, row in table["robots"].items()},
-            "truth": None if truth is None else {"mass": truth["mass"], "moment": truth["moment"]},
+            "truth": None if truth is None else {s.key: truth[s.key] for s in SCALARS},
         }
         for key in _NOT_ON_PAGE:
             del scene[key]
@@ -682,7 +749,8 @@ class TeamState:
 
     def snapshot(self, now: float) -> dict:
         """``GET /api/snapshot``: the scene (per robot: phase, m̂, Ĵ, ``contact_to_com``,
-        ``relative_positions``; the links' health; the truth when known)."""
+        ``relative_positions`` and their uncertainties; the links' health; the truth when
+        known)."""
         return self.scene(now)
 
 
@@ -692,20 +760,27 @@ _PAGE_ROW = (
     "load_changes",
     "rejoins",
     "change_score",
-    "mass",
-    "moment",
+    *(s.key for s in SCALARS),
     "contact_to_com",
+    "intervals",
     "errors",
 )
-_PAGE_ERRORS = ("mass_rel", "moment_rel", "contact_to_com_m", "relative_positions_m")
+_PAGE_ERRORS = (
+    *(s.error for s in SCALARS if s.error is not None),
+    "contact_to_com_m",
+    "relative_positions_m",
+)
 _NOT_ON_PAGE = ("truth", "plant", "received", "rejected")
 
 
 def _page_row(row: dict) -> dict:
-    """A row of the table as the page draws it (:data:`_PAGE_ROW`, :data:`_PAGE_ERRORS`)."""
+    """A row of the table as the page draws it (:data:`_PAGE_ROW`, :data:`_PAGE_ERRORS`; of
+    the intervals only those the robot published)."""
     drawn = {key: row[key] for key in _PAGE_ROW if key in row}
     if "errors" in drawn:
         drawn["errors"] = {key: drawn["errors"][key] for key in _PAGE_ERRORS}
+    if "intervals" in drawn:
+        drawn["intervals"] = {k: v for k, v in drawn["intervals"].items() if v[0] is not None}
     return drawn
 
 
@@ -720,8 +795,7 @@ def _truth_row(truth: Truth | None) -> dict | None:
             pairs[f"{i + 1}-{j + 1}"] = round(math.dist(a, b), 9)
     return {
         "tick": truth.tick,
-        "mass": truth.mass,
-        "moment": truth.moment,
+        **{s.key: getattr(truth, s.truth, None) for s in SCALARS},
         "omega": truth.omega,
         "com_offset": list(truth.com_offset),
         "com_offset_norm": round(_norm(truth.com_offset), 9),
@@ -733,3 +807,36 @@ def _truth_row(truth: Truth | None) -> dict | None:
 def _by_neighbour(est: Estimates) -> dict[str, list]:
     """``ẑ_ij`` by neighbour ``j`` (as a string, for JSON)."""
     return {str(j): list(z) for j, z in sorted(est.relative_positions.items())}
+
+
+def _intervals(est: Estimates, truth: Truth | None) -> dict[str, list]:
+    """Robot ``est.robot``'s 95 % intervals as the table gives them (see
+    :meth:`TeamState.table`)."""
+    found = {
+        s.key: scalar_interval(
+            getattr(est, s.key), getattr(est, s.std), getattr(truth, s.truth, None)
+        )
+        for s in SCALARS
+    }
+    mine = None if truth is None else truth.contact_to_com[est.robot - 1]
+    found["contact_to_com"] = planar_interval(est.contact_to_com, est.contact_to_com_cov, mine)
+    found["relative_positions"] = edges_interval(est, truth)
+    return {key: list(interval) for key, interval in found.items()}
+
+
+def _uncertainty(est: Estimates | None) -> dict:
+    """The uncertainties ``est`` published, those that can be one (else None): each scalar's
+    standard deviation, the covariances of ``p_C − p_Ci`` and of each ``ẑ_ij`` by neighbour."""
+    if est is None:
+        return {
+            **{s.std: None for s in SCALARS},
+            "contact_to_com_cov": None,
+            "relative_positions_cov": {},
+        }
+    return {
+        **{s.std: standard_deviation(getattr(est, s.std)) for s in SCALARS},
+        "contact_to_com_cov": covariance(est.contact_to_com_cov),
+        "relative_positions_cov": {
+            str(j): covariance(c) for j, c in sorted(est.relative_positions_cov.items())
+        },
+    }

@@ -5,7 +5,9 @@ random: a random spanning tree plus a few extra edges), a convex or concave load
 across with mass in [1, 50] kg, an explicit or implied moment of inertia and COM, contacts at
 random places along the boundary (at least 0.2 m apart) and a random initial pose. The graph
 kind cycles with the seed (``seed % 4``) and so does convexity (``seed // 4 % 2``), so any
-eight consecutive seeds cover every combination.
+eight consecutive seeds cover every combination. Each runs the paper's estimators, the
+reference (:data:`~agent.algorithm.tuning.PAPER_REFERENCE`): ``heft bench generated`` runs the
+default ones on the same loads.
 
 Command line: ``heft scenario generate SEED [-o FILE]`` writes the scenario as TOML.
 """
@@ -18,14 +20,14 @@ from typing import Any
 
 import numpy as np
 
-from simulator.scenario import (
-    Scenario,
+from agent.algorithm.tuning import PAPER_REFERENCE
+from simulator.polygon import (
     distance_to_boundary,
-    parse_scenario,
     point_in_polygon,
     polygon_area_centroid_moment,
     polygon_diameter,
 )
+from simulator.scenario import Scenario, parse_scenario
 
 GRAPH_KINDS = ("line", "ring", "star", "random")
 CONVEX_SHAPES = ("hull", "rectangle", "ellipse")
@@ -251,13 +253,15 @@ def generate_scenario(seed: int) -> Scenario:
         "contacts": {"points": _contacts(body["polygon"], n, rng)},
         "graph": {"edges": _edges(kind, n, rng)},
         "run": {"seed": seed},
+        "agent": dict(PAPER_REFERENCE),
     }
     return parse_scenario(data, source=f"generated-{seed}")
 
 
 def ring_scenario(n: int, *, name: str | None = None) -> Scenario:
     """``n`` robots evenly spaced around a round 3 m load, talking in a ring (for benchmarks
-    that grow the team): a 32-sided polygon of 10 kg, moment implied, COM off-centre."""
+    that grow the team): a 32-sided polygon of 10 kg, moment implied, COM off-centre; the
+    paper's estimators, as :func:`generate_scenario`'s."""
     if not 3 <= n <= 32 or 32 % n:
         raise ValueError(f"ring_scenario needs n dividing 32 with n >= 3, got {n}")
     sides = 32
@@ -274,5 +278,6 @@ def ring_scenario(n: int, *, name: str | None = None) -> Scenario:
         "body": {"polygon": polygon, "mass": 10.0, "com": [0.2, -0.1]},
         "contacts": {"points": [polygon[k * sides // n] for k in range(n)]},
         "graph": {"edges": [[i, i % n + 1] for i in range(1, n + 1)]},
+        "agent": dict(PAPER_REFERENCE),
     }
     return parse_scenario(data, data["name"])

@@ -32,18 +32,24 @@ takes its new mass, moment and COM before the period is integrated (:meth:`Plant
 The load frame stays where it is, and so do the contacts and their velocities; only the COM
 moves within the load.
 
+The floor (``scenario.ground``): without it the load slides on nothing, as in the paper; with
+it every physics substep is :meth:`simulator.friction.GroundContact.step`, which adds the
+floor's friction at the load's supports, and the truth carries the friction applied
+(:mod:`simulator.friction`).
+
 Implementation notes (pymunk 7): the body carries the scenario's mass and moment and has no
 shapes (a shape with a density would override them); space gravity is zero and damping is off;
 ``body.force``/``body.torque`` are cleared by every step, so the held forces are re-applied at
 the contacts' *current* world points before every physics substep. The per-substep path uses
-plain floats and pymunk calls only (no numpy) to keep the plant far faster than real time.
+plain floats and pymunk calls only (no numpy but the floor's one product over its supports) to
+keep the plant far faster than real time.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pymunk
@@ -51,6 +57,7 @@ from pymunk import Vec2d
 
 from agent.platform.geometry import Vec2
 from agent.platform.protocol import Measurement, Truth
+from simulator.friction import GroundContact
 
 if TYPE_CHECKING:
     from simulator.scenario import Scenario
@@ -85,7 +92,12 @@ class Plant:
         body.angle = float(spec.angle)
         body.position = (float(spec.position[0]), float(spec.position[1]))
         self._space.add(body)  # no shapes: they would override mass and moment
-        self._body = body
+        self._body, space = body, self._space
+        ground = scenario.ground
+        self._ground = None if ground is None else GroundContact(space, body, ground, self._dt)
+        """The floor's friction (:mod:`simulator.friction`); None: frictionless."""
+        self._substep = self._free_step if self._ground is None else self._ground.step
+        """One physics step with the robots' force and torque: ``(force, torque, cos θ, sin θ)``."""
         self._cog = Vec2d(float(spec.com[0]), float(spec.com[1]))
         self._local: tuple[Vec2d, ...] = tuple(
             Vec2d(float(x), float(y)) for x, y in scenario.contacts
@@ -194,10 +206,15 @@ class Plant:
         while self._events and self.time_s >= self._events[0].at_s - 1e-9:
             event = self._events.pop(0)
             self.change_load(event.mass, event.moment, event.com)
+        ground = self._ground
+        if ground is not None:
+            ground.start_tick()
         if self._ideal:
             self._advance_ideal()
         else:
             self._advance_through_drives()
+        if ground is not None:
+            ground.end_tick(self._period)
         self.tick += 1
         self._track()
 
@@ -208,16 +225,21 @@ class Plant:
         fy = sum(f[1] for f in applied)
         cross_sum = sum(a[0] * f[1] - a[1] * f[0] for a, f in zip(self._arms, applied))
         dot_sum = sum(a[0] * f[0] + a[1] * f[1] for a, f in zip(self._arms, applied))
-        body = self._body
-        step = self._space.step
-        dt = self._dt
+        body, substep = self._body, self._substep
         force = Vec2d(fx, fy)
         for _ in range(self._substeps):
             angle = body.angle
-            body.force = force
-            body.torque = math.cos(angle) * cross_sum - math.sin(angle) * dot_sum
-            step(dt)
+            c, s = math.cos(angle), math.sin(angle)
+            substep(force, c * cross_sum - s * dot_sum, c, s)
         self._applied = applied
+
+    def _free_step(self, force: Vec2d, torque: float, cos: float, sin: float) -> None:
+        """One physics step of the frictionless plant: ``force`` at the COM, ``torque`` about
+        it (the load's angle's ``cos`` and ``sin``: the floor's, :meth:`GroundContact.step`)."""
+        body = self._body
+        body.force = force
+        body.torque = torque
+        self._space.step(self._dt)
 
     def _advance_through_drives(self) -> None:
         """:meth:`advance` with the actuators' lag, gains and noise (see the module docstring):
@@ -234,7 +256,7 @@ class Plant:
         follow, arms = self._follow, self._arms
         forces = self._drive_force
         total = [[0.0, 0.0] for _ in range(n)]
-        body, step, dt = self._body, self._space.step, self._dt
+        body, substep = self._body, self._substep
         for _ in range(self._substeps):
             forces = [
                 (f[0] + (t[0] - f[0]) * follow, f[1] + (t[1] - f[1]) * follow)
@@ -249,9 +271,8 @@ class Plant:
                 acc[0] += f[0]
                 acc[1] += f[1]
             angle = body.angle
-            body.force = Vec2d(fx, fy)
-            body.torque = math.cos(angle) * cross_sum - math.sin(angle) * dot_sum
-            step(dt)
+            c, s = math.cos(angle), math.sin(angle)
+            substep(Vec2d(fx, fy), c * cross_sum - s * dot_sum, c, s)
         self._drive_force = forces
         m = self._substeps
         self._applied = tuple((acc[0] / m, acc[1] / m) for acc in total)
@@ -276,6 +297,8 @@ class Plant:
             body.mass = float(mass)
         if moment is not None:
             body.moment = float(moment)
+        if self._ground is not None:
+            self._ground.set_loads()  # the weight and its centre moved: the normal loads too
 
     def _com_position(self) -> Vec2:
         """``p_C`` now."""
@@ -316,4 +339,21 @@ class Plant:
             largest_travel=self.largest_travel,
             largest_speed=self.largest_speed,
             largest_omega=self.largest_omega,
+            **self._ground_truth(),
         )
+
+    def _ground_truth(self) -> dict[str, Any]:
+        """The floor's fields of :class:`Truth` (none without friction: their zeros)."""
+        contact = self._ground
+        if contact is None:
+            return {}
+        ground, loads = contact.ground, contact.loads
+        return {
+            "ground_coulomb": ground.coulomb,
+            "ground_static": ground.static,
+            "ground_viscous": ground.viscous,
+            "friction_radius": loads.friction_radius,
+            "viscous_radius2": loads.viscous_radius2,
+            "friction_force": contact.force,
+            "friction_torque": contact.torque,
+        }

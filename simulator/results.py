@@ -35,12 +35,17 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from agent.algorithm.estimation.estimator import largest_std
 from agent.platform import evaluation
-from agent.platform.evaluation import ERROR_KEYS, true_relative
+from agent.platform.evaluation import (
+    ERROR_KEYS,
+    edges_interval,
+    planar_interval,
+    scalar_interval,
+    true_relative,
+)
 
 if TYPE_CHECKING:
-    from agent.platform.protocol import Estimates
+    from agent.platform.protocol import Estimates, Truth
     from simulator.inprocess import RunOutcome
     from simulator.scenario import Scenario
 
@@ -95,6 +100,24 @@ def _truth_dict(outcome: RunOutcome) -> dict[str, Any]:
         "omega": _number(truth.omega),
         "com_offset": _vec(truth.com_offset),
         "robots": robots,
+        "ground": ground_dict(truth),
+    }
+
+
+def ground_dict(truth: Truth) -> dict[str, Any]:
+    """The floor under the load as the plant applied it at the final instant (all zero without
+    friction): ``coulomb`` μ, ``static`` μ_s, ``viscous`` b (N s/m), ``friction_radius`` c (m:
+    a pure spin meets ``μ m g c``), ``viscous_radius2`` ρ² (m²: a spin meets ``b ρ² ω``), and
+    the floor's ``friction_force`` (N, ``[x, y]``) and ``friction_torque`` (N m, about the COM)
+    averaged over the last period."""
+    return {
+        "coulomb": _number(truth.ground_coulomb),
+        "static": _number(truth.ground_static),
+        "viscous": _number(truth.ground_viscous),
+        "friction_radius": _number(truth.friction_radius),
+        "viscous_radius2": _number(truth.viscous_radius2),
+        "friction_force": _vec(truth.friction_force),
+        "friction_torque": _number(truth.friction_torque),
     }
 
 
@@ -159,40 +182,6 @@ def errors(outcome: RunOutcome) -> dict[str, float | None]:
 
 
 # ------------------------------------------------------------------------------ intervals
-SCALAR_95 = 1.959964
-"""A normal scalar is within this many standard deviations 95 % of the time."""
-PLANAR_95 = 5.991465
-"""A planar normal vector's squared Mahalanobis distance is at most this 95 % of the time."""
-
-
-def _scalar_interval(estimate, std, truth: float) -> tuple[float | None, bool | None]:
-    if estimate is None or std is None:
-        return None, None
-    half = SCALAR_95 * std
-    return half, abs(estimate - truth) <= half
-
-
-def distance2(error: Sequence[float], cov: Sequence[float]) -> float:
-    """``eᵀ C⁻¹ e``: the squared Mahalanobis distance of a planar ``error`` under the
-    covariance ``cov`` ``(xx, xy, yy)`` (0 for no error, infinite for an error outside a
-    singular ``C``'s range)."""
-    xx, xy, yy = cov
-    ex, ey = error
-    det = xx * yy - xy * xy
-    if det <= 0.0:
-        return 0.0 if ex == 0.0 and ey == 0.0 else math.inf
-    return (yy * ex * ex - 2.0 * xy * ex * ey + xx * ey * ey) / det
-
-
-def _planar_interval(estimate, cov, truth) -> tuple[float | None, bool | None]:
-    """The 95 % ellipse's half-width along its longest axis, and whether ``truth`` is in it."""
-    if estimate is None or cov is None:
-        return None, None
-    half = math.sqrt(PLANAR_95) * largest_std(*cov)
-    error = (estimate[0] - truth[0], estimate[1] - truth[1])
-    return half, distance2(error, cov) <= PLANAR_95
-
-
 def intervals(outcome: RunOutcome, robot: int) -> dict[str, Any] | None:
     """Robot ``robot``'s published 95 % intervals against the truth at the final instant:
     ``{"mass": [half-width kg, inside], "moment": [...], "contact_to_com": [half-width m,
@@ -202,23 +191,15 @@ def intervals(outcome: RunOutcome, robot: int) -> dict[str, Any] | None:
     if est is None or (est.mass_std is None and not est.relative_positions_cov):
         return None
     truth = outcome.final.truth
-    i = robot
-    edges = [
-        _planar_interval(est.relative_positions.get(j), cov, true_relative(truth, i, j))
-        for j, cov in sorted(est.relative_positions_cov.items())
-    ]
-    edges = [e for e in edges if e[0] is not None]
     return {
-        "mass": list(_scalar_interval(est.mass, est.mass_std, truth.mass)),
-        "moment": list(_scalar_interval(est.moment, est.moment_std, truth.moment)),
+        "mass": list(scalar_interval(est.mass, est.mass_std, truth.mass)),
+        "moment": list(scalar_interval(est.moment, est.moment_std, truth.moment)),
         "contact_to_com": list(
-            _planar_interval(
-                est.contact_to_com, est.contact_to_com_cov, truth.contact_to_com[i - 1]
+            planar_interval(
+                est.contact_to_com, est.contact_to_com_cov, truth.contact_to_com[robot - 1]
             )
         ),
-        "relative_positions": [max(e[0] for e in edges), all(e[1] for e in edges)]
-        if edges
-        else [None, None],
+        "relative_positions": list(edges_interval(est, truth)),
     }
 
 

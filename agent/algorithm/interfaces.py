@@ -27,6 +27,8 @@ class OwnEstimates(Protocol):
     """The last instant whose ``ω`` was measured."""
     zdot: dict[int, Vec2]
     """``ż_ij`` at the estimation instant, by neighbour."""
+    velocity: Vec2 | None
+    """``ṗ_Ci``, the robot's own velocity, at the estimation instant."""
     com_velocity: Vec2 | None
     """``ṗ_C`` (Step 6)."""
     changed: bool

@@ -83,6 +83,8 @@ class EstimationPipeline:
         """The last instant whose ω was measured (Steps 4–7 use only those)."""
         self.zdot: dict[int, Vec2] = {}
         """``ż_ij`` at the estimation instant, by neighbour."""
+        self.velocity: Vec2 | None = None
+        """``ṗ_Ci``, this robot's own velocity, at the estimation instant."""
         self.consensus = TeamConsensus(config.robot, self.neighbours, self._inputs)
         """Step 2 and the team's means (:mod:`agent.algorithm.estimation.team_consensus`)."""
         self.inertia: Any = None
@@ -147,6 +149,7 @@ class EstimationPipeline:
         previous = self.instant
         self.instant = e
         v_i = inbox.own_velocity.get(e)
+        self.velocity = v_i
         zdots: dict[int, Vec2] = {}
         self.zdot = zdots
         if v_i is not None:

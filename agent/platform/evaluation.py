@@ -7,7 +7,9 @@ them gives the same figures under the same names:
 
 - :func:`final_instant`: the instant a run's estimates are evaluated at;
 - :func:`robot_errors`: one robot's errors, :data:`ERROR_KEYS`, in SI units;
-- :func:`team_errors`: the worst of each over the team.
+- :func:`team_errors`: the worst of each over the team;
+- :func:`scalar_interval`, :func:`planar_interval` and :func:`edges_interval`: a published
+  uncertainty's 95 % interval and whether the truth lies inside it.
 
 Conventions (those of :mod:`agent.platform.protocol`): ``contact_to_com`` of robot ``i`` is
 ``p_C − p_Ci``; ``relative_positions[j]`` is ``z_ij = p_Ci − p_Cj``; ``centroid_offset`` is
@@ -21,8 +23,8 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Protocol
 
-from agent.platform.geometry import Vec2
-from agent.platform.protocol import Estimates, Phase, Truth
+from agent.platform.geometry import Vec2, largest_std
+from agent.platform.protocol import Cov2, Estimates, Phase, Truth
 
 ERROR_KEYS = (
     "mass_rel",
@@ -121,3 +123,88 @@ def team_errors(
     estimate (the worst is then unknown)."""
     rows = [robot_errors(estimates.get(i), truth, graph[i]) for i in graph]
     return {key: _worst(row[key] for row in rows) for key in ERROR_KEYS}
+
+
+# ------------------------------------------------------------------------------ intervals
+SCALAR_95 = 1.959964
+"""A normal scalar is within this many standard deviations 95 % of the time."""
+PLANAR_95 = 5.991465
+"""A planar normal vector's squared Mahalanobis distance is at most this 95 % of the time."""
+
+
+def standard_deviation(value: float | None) -> float | None:
+    """``value`` if it can be a standard deviation (a finite number ``≥ 0``), else None: an
+    uncertainty that came over the network is used only then."""
+    return value if value is not None and math.isfinite(value) and value >= 0.0 else None
+
+
+def covariance(cov: Sequence[float] | None) -> Cov2 | None:
+    """``cov`` ``(xx, xy, yy)`` if it can be a planar covariance (finite, positive
+    semi-definite to rounding), else None."""
+    if cov is None or len(cov) != 3 or not all(map(math.isfinite, cov)):
+        return None
+    xx, xy, yy = cov
+    if xx < 0.0 or yy < 0.0 or xy * xy > xx * yy * (1.0 + 1e-9) + 1e-300:
+        return None
+    return (xx, xy, yy)
+
+
+def distance2(error: Sequence[float], cov: Sequence[float]) -> float:
+    """``eᵀ C⁻¹ e``: the squared Mahalanobis distance of a planar ``error`` under the
+    covariance ``cov`` ``(xx, xy, yy)`` (0 for no error, infinite for an error outside a
+    singular ``C``'s range)."""
+    xx, xy, yy = cov
+    ex, ey = error
+    det = xx * yy - xy * xy
+    if det <= 0.0:
+        return 0.0 if ex == 0.0 and ey == 0.0 else math.inf
+    return (yy * ex * ex - 2.0 * xy * ex * ey + xx * ey * ey) / det
+
+
+Interval = tuple[float | None, bool | None]
+"""A 95 % interval's half-width and whether the truth lies inside it (None: unknown)."""
+
+
+def scalar_interval(estimate: float | None, std: float | None, truth: float | None) -> Interval:
+    """``±1.96 σ`` about ``estimate``: its half-width and whether ``|estimate − truth|`` is
+    within it (None without a ``truth``); ``(None, None)`` without an estimate or a
+    standard deviation (:func:`standard_deviation`)."""
+    std = standard_deviation(std)
+    if estimate is None or std is None or not math.isfinite(half := SCALAR_95 * std):
+        return None, None
+    return half, None if truth is None else abs(estimate - truth) <= half
+
+
+def planar_interval(estimate: Vec2 | None, cov: Sequence[float] | None, truth) -> Interval:
+    """The 95 % ellipse ``eᵀ C⁻¹ e ≤ 5.99`` about ``estimate``: its half-width along its
+    longest axis and whether ``truth`` is in it (None without a ``truth``); ``(None, None)``
+    without an estimate or a covariance (:func:`covariance`)."""
+    cov = covariance(cov)
+    if estimate is None or cov is None:
+        return None, None
+    half = math.sqrt(PLANAR_95) * largest_std(*cov)
+    if not math.isfinite(half):
+        return None, None
+    if truth is None:
+        return half, None
+    error = (estimate[0] - truth[0], estimate[1] - truth[1])
+    return half, distance2(error, cov) <= PLANAR_95
+
+
+def edges_interval(est: Estimates, truth: Truth | None) -> Interval:
+    """Robot ``est.robot``'s ``ẑ_ij`` against their 95 % ellipses (:func:`planar_interval`),
+    over the neighbours it published a covariance for (and, with a ``truth``, that are robots
+    of it): the widest half-width, and whether every ``z_ij`` is inside."""
+    i, n = est.robot, None if truth is None else len(truth.contacts)
+    edges = [
+        planar_interval(
+            est.relative_positions.get(j), cov, None if n is None else true_relative(truth, i, j)
+        )
+        for j, cov in sorted(est.relative_positions_cov.items())
+        if n is None or (1 <= j <= n and i <= n)
+    ]
+    edges = [e for e in edges if e[0] is not None]
+    if not edges:
+        return None, None
+    inside = None if truth is None else all(e[1] for e in edges)
+    return max(e[0] for e in edges), inside

@@ -47,6 +47,12 @@ def turned_covariance(cov, angle: float):
     return ((xx, xy), (xy, yy))
 
 
+def largest_std(xx: float, xy: float, yy: float) -> float:
+    """The standard deviation along the least certain axis of a planar covariance
+    ``[[xx, xy], [xy, yy]]``: the square root of its larger eigenvalue."""
+    return math.sqrt(max(0.5 * (xx + yy) + math.hypot(0.5 * (xx - yy), xy), 0.0))
+
+
 def angle_between(a: Vec2, b: Vec2) -> float:
     """The signed angle in ``(-π, π]`` that turns the direction of ``a`` onto that of ``b``."""
     return math.atan2(cross(a, b) + 0.0, dot(a, b))  # + 0.0: a -0.0 cross would give -π

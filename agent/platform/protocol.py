@@ -43,6 +43,8 @@ from agent.platform.team import ConsensusState
 
 Cov2 = tuple[float, float, float]
 """A 2×2 covariance ``(xx, xy, yy)``."""
+GRAVITY = 9.81
+"""m/s²: ``g``. A load of mass ``m`` weighs ``m g``; friction coefficients are fractions of it."""
 
 
 class Phase(IntEnum):
@@ -242,6 +244,22 @@ class Truth:
     largest_travel: float = 0.0
     largest_speed: float = 0.0
     largest_omega: float = 0.0
+    ground_coulomb: float = 0.0
+    """``μ``: the floor's kinetic friction, a fraction of the weight ``m g`` (0: no friction)."""
+    ground_static: float = 0.0
+    """``μ_s ≥ μ``: its breakaway friction."""
+    ground_viscous: float = 0.0
+    """``b``: its viscous drag on the whole load (N s/m)."""
+    friction_radius: float = 0.0
+    """``c = Σ_k N_k ‖r_k‖ / (m g)`` (m), ``N_k`` the normal load on support ``k`` and ``r_k``
+    its arm from the COM: a pure spin about the COM meets the friction torque ``μ m g c``."""
+    viscous_radius2: float = 0.0
+    """``ρ² = Σ_k N_k ‖r_k‖² / (m g)`` (m²): a spin meets the viscous torque ``b ρ² ω``."""
+    friction_force: Vec2 = (0.0, 0.0)
+    """The floor's force on the load (Coulomb and viscous), averaged over the period that
+    ended at ``tick`` (N; zero at tick 0 and without friction)."""
+    friction_torque: float = 0.0
+    """Its torque about the COM, averaged likewise (N m)."""
 
     @property
     def centroid(self) -> Vec2:
@@ -487,7 +505,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 8
+WIRE_VERSION = 9
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -833,10 +851,28 @@ def _truth(m: Truth) -> None:
         raise DecodeError("truth: contacts, contact_velocities, contact_to_com differ in length")
     if not (m.mass > 0 and m.moment > 0):
         raise DecodeError("truth: mass and moment must be positive")
-    for name in ("largest_travel", "largest_speed", "largest_omega"):
+    for name in (
+        "largest_travel",
+        "largest_speed",
+        "largest_omega",
+        "ground_coulomb",
+        "ground_viscous",
+        "friction_radius",
+        "viscous_radius2",
+    ):
         value = getattr(m, name)
         if not (_math.isfinite(value) and value >= 0.0):
             raise DecodeError(f"truth.{name} = {value!r} is not a finite number >= 0")
+    if not m.ground_static >= m.ground_coulomb:
+        raise DecodeError(
+            f"truth.ground_static = {m.ground_static!r} is below ground_coulomb"
+            f" = {m.ground_coulomb!r}"
+        )
+    if not m.friction_radius**2 <= m.viscous_radius2 * (1.0 + 1e-9) + 1e-300:
+        raise DecodeError(
+            f"truth: friction_radius² = {m.friction_radius**2!r} exceeds viscous_radius2"
+            f" = {m.viscous_radius2!r} (a mean radius above its root mean square)"
+        )
 
 
 def _load_geometry(m: LoadGeometry) -> None:

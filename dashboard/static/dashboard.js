@@ -4,6 +4,10 @@
 // Memory is bounded: a time chart keeps at most MAX_COLUMNS instants (the server sends at most
 // MAX_POINTS points per trace), and the points that arrive while paused wait in the same
 // arrays (paused, only the drawing stops).
+//
+// The estimated scalars (m̂, Ĵ, and whatever dashboard/quantities.py declares) come with the
+// hello: each gets a time chart and columns of the table. A point [t, value, h] carries its
+// 95 % interval value ± h, drawn as a band in the robot's colour.
 "use strict";
 
 const MAX_POINTS = 3000;
@@ -35,13 +39,23 @@ function fmt(value, digits) {
 function scaled(value, factor) {
   return value === null || value === undefined ? value : value * factor;
 }
+// Whether h can be the half-width of a 95 % interval about value (anything else: none drawn).
+function halfWidth(value, h) {
+  return typeof h === "number" && h >= 0 && Number.isFinite(value - h) && Number.isFinite(value + h);
+}
+// A colour of ours ("#rrggbb") made translucent, for a band.
+function faded(hex) { return `${hex}2a`; }
 
 // ------------------------------------------------------------------------ time charts
 // The time charts are uPlot's (canvas: in heft bench --dashboard, 16 robots and three pages
 // on two cores, a chart's redraw took p99 25 ms, where Plotly's SVG charts took 277 ms).
 // uPlot draws a chart's traces on one shared x axis: a chart keeps the sorted
 // union of its traces' times (the server's points are at ticks' times) and a column of values
-// per trace, null where a trace has no point at that time (its line spans the gap).
+// per trace, null where a trace has no point at that time (its line spans the gap). A trace
+// whose robot published an uncertainty gets two more columns, value − h and value + h, drawn
+// as a uPlot band under the lines (from its first point with an h; where a later point has
+// none, the band narrows to the line). The y range holds the lines and each band where the
+// shown x range ends (how sure each robot is then), not the wider bands of earlier times.
 const MAX_COLUMNS = 2 * MAX_POINTS; // the robots' points and the truth's may fall on different ticks
 const DASHES = { solid: null, dash: [6, 4], dot: [2, 3] };
 const AXIS = {
@@ -61,11 +75,15 @@ function tickLabels(u, splits) {
 }
 
 function labelWidth(u, values, axis, cycle) {
-  // the y axis as wide as its longest tick label (uPlot calls this again once labels change)
-  if (cycle > 1 || !values) return u.axes[axis]._size || 48;
+  // the y axis as wide as its longest tick label (uPlot calls this again once labels change,
+  // and again within one layout, at most 3 times, as the other axes' sizes change the y
+  // axis' ticks: then it only widens, so that the layout settles and no label is cut)
+  const before = u.axes[axis]._size;
+  if (!values) return before || 48;
   u.ctx.font = u.axes[axis].font[0]; // the font as uPlot scales it for the canvas
   const widest = values.reduce((w, v) => Math.max(w, u.ctx.measureText(String(v)).width), 0);
-  return Math.ceil(widest / devicePixelRatio) + 16;
+  const size = Math.ceil(widest / devicePixelRatio) + 16;
+  return cycle > 1 && before ? Math.max(before, size) : size;
 }
 
 class TimeChart {
@@ -80,10 +98,10 @@ class TimeChart {
     this.reset();
   }
   reset() {
-    this.traces = []; // trace ids, in column order
-    this.index = new Map(); // trace id -> column
+    this.traces = []; // {id, value: its column, band: [column of value − h, of value + h] | null}
+    this.index = new Map(); // trace id -> its entry in this.traces
     this.x = [];
-    this.ys = [];
+    this.ys = []; // the columns: every trace's values and its band's edges
     this.last = new Map(); // trace id -> newest t
     this.dirty = true;
     this.rebuild = true;
@@ -110,19 +128,29 @@ class TimeChart {
     }
     return lo;
   }
+  newColumn() {
+    this.ys.push(new Array(this.x.length).fill(null));
+    this.rebuild = true;
+    return this.ys.length - 1;
+  }
   add(trace, points) {
-    let i = this.index.get(trace);
-    if (i === undefined) {
-      i = this.traces.length;
-      this.index.set(trace, i);
-      this.traces.push(trace);
-      this.ys.push(new Array(this.x.length).fill(null));
-      this.rebuild = true;
+    let entry = this.index.get(trace);
+    if (entry === undefined) {
+      entry = { id: trace, value: this.newColumn(), band: null };
+      this.index.set(trace, entry);
+      this.traces.push(entry);
     }
     let last = this.last.has(trace) ? this.last.get(trace) : -Infinity;
-    for (const [t, y] of points) {
+    for (const [t, y, h] of points) {
       if (t <= last) continue; // already drawn (a hello and a frame may overlap)
-      this.ys[i][this.column(t)] = y;
+      const k = this.column(t);
+      this.ys[entry.value][k] = y;
+      const known = halfWidth(y, h);
+      if (known && !entry.band) entry.band = [this.newColumn(), this.newColumn()];
+      if (entry.band) {
+        this.ys[entry.band[0]][k] = known ? y - h : y;
+        this.ys[entry.band[1]][k] = known ? y + h : y;
+      }
       last = t;
     }
     this.last.set(trace, last);
@@ -140,10 +168,17 @@ class TimeChart {
     const slack = 1e-9 * Math.max(1, Math.abs(last - first));
     return scale.min > first + slack || scale.max < last - slack;
   }
+  data() {
+    // uPlot's data: the x column, each band's upper and lower edges, then the traces' values
+    const ys = this.ys;
+    return [this.x, ...this.banded().flatMap((e) => [ys[e.band[1]], ys[e.band[0]]]),
+      ...this.traces.map((e) => ys[e.value])];
+  }
+  banded() { return this.traces.filter((e) => e.band); }
   flush() {
     if (!this.dirty && !this.rebuild) return;
     // uPlot reads the arrays themselves: they change only between its redraws, in add()
-    const data = [this.x, ...this.ys];
+    const data = this.data();
     const zoomed = this.zoomed();
     this.shown = this.x.length ? [this.x[0], this.x[this.x.length - 1]] : null;
     this.dirty = false;
@@ -154,25 +189,49 @@ class TimeChart {
     const range = this.plot && zoomed ? [this.plot.scales.x.min, this.plot.scales.x.max] : null;
     if (this.plot) this.plot.destroy();
     this.rebuild = false;
-    const series = [{ label: "t" }];
-    for (const trace of this.traces) {
-      const look = this.describe(trace);
+    const series = [{ label: "t" }], bands = [];
+    for (const entry of this.banded()) {
+      // the band's edges: not stroked, not in the y range (a wide interval does not squash
+      // the estimates); uPlot fills between them, clipped to the plot
+      const look = this.describe(entry.id);
+      const edge = { width: 0, auto: false, spanGaps: true, points: { show: false } };
+      series.push({ ...edge, label: `${look.name} + 95 %` }, { ...edge, label: `${look.name} − 95 %` });
+      bands.push({ series: [series.length - 2, series.length - 1], fill: faded(look.colour) });
+    }
+    for (const entry of this.traces) {
+      const look = this.describe(entry.id);
       series.push({ label: look.name, stroke: look.colour, width: look.width || 1.6,
         dash: DASHES[look.dash || "solid"], spanGaps: true, points: { show: false } });
     }
     this.plot = new uPlot({
       ...this.size(),
       legend: { show: false },
-      scales: { x: { time: false } },
+      scales: { x: { time: false }, y: { range: (u, min, max) => this.yRange(u, min, max) } },
       cursor: { drag: { x: true, y: false }, points: { show: false } },
       axes: [
         { ...AXIS, label: "t (s)", labelSize: 16, labelFont: AXIS.font, size: 30 },
         { ...AXIS, size: labelWidth, values: tickLabels },
       ],
       series,
+      bands,
       hooks: { draw: [(u) => drawSwitchLines(u, this.switches)] },
     }, data, this.div);
     if (range) this.plot.setScale("x", { min: range[0], max: range[1] });
+  }
+  yRange(u, min, max) {
+    // the lines' range (uPlot's min, max), widened to each band's newest edges within the x range
+    let lo = min, hi = max;
+    const end = u.scales.x.max, x = this.x;
+    for (const entry of this.banded()) {
+      const lower = this.ys[entry.band[0]], upper = this.ys[entry.band[1]];
+      for (let k = x.length - 1; k >= 0; k--) {
+        if ((end != null && x[k] > end) || lower[k] === null) continue;
+        lo = lo === null ? lower[k] : Math.min(lo, lower[k]);
+        hi = hi === null ? upper[k] : Math.max(hi, upper[k]);
+        break;
+      }
+    }
+    return lo === null || hi === null ? [null, null] : uPlot.rangeNum(lo, hi, 0.1, true);
   }
   setSwitches(switches) {
     if (JSON.stringify(switches) === JSON.stringify(this.switches)) return;
@@ -180,22 +239,40 @@ class TimeChart {
     if (this.plot) this.plot.redraw(false, false);
   }
   lines() {
-    // [{name, x, y}] per trace: its points, in time order
-    return this.traces.map((trace, i) => {
-      const x = [], y = [];
-      this.ys[i].forEach((value, k) => { if (value !== null) { x.push(this.x[k]); y.push(value); } });
-      return { name: this.describe(trace).name, x, y };
+    // [{name, x, y, h}] per trace: its points, in time order, and their 95 % half-widths
+    // (null where it has none)
+    return this.traces.map((entry) => {
+      const x = [], y = [], h = [], values = this.ys[entry.value];
+      const upper = entry.band ? this.ys[entry.band[1]] : null;
+      values.forEach((value, k) => {
+        if (value === null) return;
+        x.push(this.x[k]);
+        y.push(value);
+        h.push(upper && upper[k] !== null && upper[k] > value ? upper[k] - value : null);
+      });
+      return { name: this.describe(entry.id).name, x, y, h };
+    });
+  }
+  bands() {
+    // [{name, x, lower, upper}] per band drawn: its edges where its trace has points
+    return this.banded().map((entry) => {
+      const x = [], lower = [], upper = [], lo = this.ys[entry.band[0]], hi = this.ys[entry.band[1]];
+      lo.forEach((value, k) => {
+        if (value === null) return;
+        x.push(this.x[k]); lower.push(value); upper.push(hi[k]);
+      });
+      return { name: this.describe(entry.id).name, x, lower, upper };
     });
   }
   visible() {
-    // [trace name, t, value] of the points inside the current x range
+    // [trace name, t, value, 95 % half-width or ""] of the points inside the current x range
     const scale = this.plot ? this.plot.scales.x : null;
     const zoomed = this.zoomed();
     const rows = [];
     for (const line of this.lines()) {
       line.x.forEach((t, k) => {
         if (zoomed && (t < scale.min || t > scale.max)) return;
-        rows.push([line.name, t, line.y[k]]);
+        rows.push([line.name, t, line.y[k], line.h[k] === null ? "" : line.h[k]]);
       });
     }
     return rows;
@@ -216,23 +293,55 @@ function edgeTrace(trace) {
   if (truth) return { name: `‖z${i}${j}‖ (truth)`, colour: colour(i), dash: "dot", width: 1 };
   return { name: `‖ẑ${i}${j}‖ robot ${i}`, colour: colour(i), dash: dash(i) };
 }
+function contactTrace(trace) {
+  // ctc/ROBOT and ctc/ROBOT/truth: robot i's distance from its contact to the COM
+  const [, who, truth] = trace.split("/");
+  const robot = Number(who);
+  if (truth) return { name: `‖pC − pC${robot}‖ (truth)`, colour: colour(robot), dash: "dot", width: 1 };
+  return { name: `‖p̂C − pC${robot}‖ robot ${robot}`, colour: colour(robot), dash: dash(robot) };
+}
 
+// The estimated scalars' charts come with the hello (declare()), before these, in its order.
 const charts = {
-  mass: new TimeChart("chart-mass", "mass", robotTrace("m̂")),
-  moment: new TimeChart("chart-moment", "moment", robotTrace("Ĵ")),
   edge: new TimeChart("chart-edge", "edge", edgeTrace),
-  com: new TimeChart("chart-com", "com", robotTrace("‖ẑC‖")),
+  ctc: new TimeChart("chart-ctc", "ctc", contactTrace),
   omega: new TimeChart("chart-omega", "omega", robotTrace("ω")),
 };
 
 // ------------------------------------------------------------------------ the page's state
 const heft = {
-  scene: null, epoch: null, paused: false, frames: 0, receipts: [], charts: charts,
+  scene: null, epoch: null, paused: false, frames: 0, receipts: [], charts: charts, scalars: [],
   views: {}, // the xy views, by name
   lastShape: "", wake: null, socket: null,
   chartMs: [], sceneMs: [], // how long each redraw took (ms), the newest RECEIPTS
 };
 window.heft = heft;
+
+// The estimated scalars the hello declares: a chart each (a panel before the edges' chart, in
+// the declared order) and the table's columns.
+function declare(scalars) {
+  const known = heft.scalars.map((s) => s.key).join(",");
+  if (!Array.isArray(scalars) || scalars.map((s) => s.key).join(",") === known) return;
+  heft.scalars = scalars;
+  const before = document.getElementById("chart-edge").parentElement;
+  for (const s of scalars) {
+    if (charts[s.key]) continue;
+    const panel = document.createElement("div");
+    panel.className = "panel";
+    const heading = document.createElement("h2");
+    const unit = document.createElement("span");
+    unit.className = "unit";
+    unit.textContent = s.unit;
+    heading.append(`${s.title} ${s.symbol} `, unit);
+    const chart = document.createElement("div");
+    chart.id = `chart-${s.key}`;
+    chart.className = "chart";
+    panel.append(heading, chart);
+    before.before(panel);
+    charts[s.key] = new TimeChart(chart.id, s.key, robotTrace(s.symbol));
+    addChartJob(s.key, charts[s.key]);
+  }
+}
 
 function takePoints(points) {
   for (const [trace, list] of Object.entries(points)) {
@@ -492,8 +601,29 @@ function drawTop(scene) {
     data.push([[top.com[0]], [top.com[1]]]);
     labels.push([top.com[0], top.com[1], "C", TRUTH_COLOUR, null, 11]);
   }
-  const extent = extentOf(data);
+  const extent = extentOf(data); // the ellipses do not set it: a wide one would hide the load
+  for (const [robot, axes] of Object.entries(top.com_ellipses || {})) {
+    const p = (top.com_estimates || {})[robot];
+    const xy = p && ellipse(p, axes);
+    if (!xy) continue;
+    series.push({ name: `COM 95 % ellipse ${robot}`, stroke: colour(Number(robot)), width: 1, dash: [3, 3] });
+    data.push(xy);
+  }
   topView.show(series, data, { x: widen(extent.x, 0.08), y: widen(extent.y, 0.08) }, labels);
+}
+
+// The 95 % ellipse [major, minor semi-axis (m), angle of the major axis] about p, as a closed
+// line; null unless its numbers can be one.
+function ellipse(p, axes) {
+  if (!Array.isArray(axes) || axes.length !== 3 || !axes.every(Number.isFinite)
+    || axes[0] < 0 || axes[1] < 0) return null;
+  const [a, b, angle] = axes, c = Math.cos(angle), s = Math.sin(angle), xs = [], ys = [];
+  for (let k = 0; k <= 48; k++) {
+    const u = (2 * Math.PI * k) / 48, ex = a * Math.cos(u), ey = b * Math.sin(u);
+    xs.push(p[0] + c * ex - s * ey);
+    ys.push(p[1] + s * ex + c * ey);
+  }
+  return [xs, ys];
 }
 
 // ------------------------------------------------------------------------ the graph
@@ -547,30 +677,55 @@ function put(id, property, value) {
 }
 
 // ------------------------------------------------------------------------ the table
+// Beside each value with a published uncertainty, "± h": its 95 % interval's half-width, in the
+// value's unit (kg, kg m²; mm for p̂_C − p_Ci and ẑ_ij, along the 95 % ellipse's longest axis,
+// as heft run's "95 % intervals" table); beside its error, ✓ when the truth lies inside the
+// interval (the ellipse), ✗ when it does not.
+function plain(symbol) { return symbol.normalize("NFD").replace(/\u0302/g, ""); }
+function plusMinus(interval, factor, digits) {
+  const h = Array.isArray(interval) ? interval[0] : null;
+  return typeof h === "number" && Number.isFinite(h) && h >= 0
+    ? `<span class="pm" title="95 % interval">±${fmt(h * factor, digits)}</span>` : "";
+}
+function verdict(interval) {
+  const inside = Array.isArray(interval) ? interval[1] : null;
+  if (inside === true) return ` <span class="inside" title="the truth lies inside the 95 % interval">✓</span>`;
+  if (inside === false) return ` <span class="outside" title="the truth lies outside the 95 % interval">✗</span>`;
+  return "";
+}
 function drawTable(scene) {
-  const table = scene.table;
+  const table = scene.table, scalars = heft.scalars;
   put("table-title", "innerHTML", table.final
     ? `<span class="final">final</span> estimates against truth (t = ${fmt(table.t, 2)} s)`
     : "latest estimates against truth");
-  const rows = [`<tr><th>robot</th><th>phase</th><th>m̂ kg</th><th>Ĵ kg m²</th>`
-    + `<th title="|m̂ − m| / m">m %</th><th title="|Ĵ − J| / J">J %</th>`
+  const judged = scalars.filter((s) => s.error);
+  const rows = [`<tr><th>robot</th><th>phase</th>`
+    + scalars.map((s) => `<th>${s.symbol} ${s.unit}</th>`).join("")
+    + judged.map((s) => {
+      const [name, hat] = [plain(s.symbol), s.symbol];
+      return s.relative ? `<th title="|${hat} − ${name}| / ${name}">${name} %</th>`
+        : `<th title="|${hat} − ${name}|">${name} ${s.unit}</th>`;
+    }).join("")
     + `<th title="‖(p̂_C − p_Ci) − (p_C − p_Ci)‖">c mm</th><th title="max_j ‖ẑ_ij − z_ij‖">z mm</th></tr>`];
   for (const [robot, row] of Object.entries(table.robots)) {
-    const e = row.errors || {};
+    const e = row.errors || {}, intervals = row.intervals || {};
     const c = row.contact_to_com ? `p̂_C − p_C${robot} = (${fmt(row.contact_to_com[0], 4)}, ${fmt(row.contact_to_com[1], 4)}) m` : "";
     rows.push(`<tr title="${c}"><td><span class="swatch" style="background:${colour(Number(robot))}"></span>${robot}</td>`
       + `<td style="color:${PHASE_COLOURS[row.phase] || "inherit"}"`
       + ` title="probe score: ${row.change_score == null ? "–" : fmt(row.change_score, 1) + " σ"}">`
       + `${row.phase}${row.load_changes ? ` <span class="restarts">(load changes: ${row.load_changes})</span>` : ""}`
       + `${row.rejoins ? ` <span class="restarts">(begun again: rejoin ${row.rejoins})</span>` : ""}</td>`
-      + `<td>${fmt(row.mass, 4)}</td><td>${fmt(row.moment, 4)}</td>`
-      + `<td>${fmt(scaled(e.mass_rel, 100), 3)}</td><td>${fmt(scaled(e.moment_rel, 100), 3)}</td>`
-      + `<td>${fmt(scaled(e.contact_to_com_m, 1000), 2)}</td>`
-      + `<td>${fmt(scaled(e.relative_positions_m, 1000), 2)}</td></tr>`);
+      + scalars.map((s) => `<td>${fmt(row[s.key], s.digits)}${plusMinus(intervals[s.key], 1, s.digits)}</td>`).join("")
+      + judged.map((s) => `<td>${fmt(scaled(e[s.error], s.relative ? 100 : 1), 3)}${verdict(intervals[s.key])}</td>`).join("")
+      + `<td>${fmt(scaled(e.contact_to_com_m, 1000), 2)}${verdict(intervals.contact_to_com)}`
+      + `${plusMinus(intervals.contact_to_com, 1000, 2)}</td>`
+      + `<td>${fmt(scaled(e.relative_positions_m, 1000), 2)}${verdict(intervals.relative_positions)}`
+      + `${plusMinus(intervals.relative_positions, 1000, 2)}</td></tr>`);
   }
   if (table.truth) {
-    rows.push(`<tr class="truth"><td>truth</td><td></td><td>${fmt(table.truth.mass, 4)}</td>`
-      + `<td>${fmt(table.truth.moment, 4)}</td><td colspan="4"></td></tr>`);
+    rows.push(`<tr class="truth"><td>truth</td><td></td>`
+      + scalars.map((s) => `<td>${fmt(table.truth[s.key], s.digits)}</td>`).join("")
+      + `<td colspan="${judged.length + 2}"></td></tr>`);
   }
   put("table", "innerHTML", rows.join(""));
 }
@@ -612,8 +767,6 @@ function drawHeader(scene, source) {
 const BUDGET = 4;
 const FRAME_MS = 12;
 const jobs = [
-  ...Object.entries(charts).map(([name, chart]) => ({
-    name, every: CHART_EVERY_MS, chart: true, run: () => chart.flush() })),
   { name: "top", every: SCENE_EVERY_MS, run: () => drawTop(heft.scene) },
   { name: "table", every: SCENE_EVERY_MS, run: () => drawTable(heft.scene) },
   { name: "switches", every: SLOW_EVERY_MS, run: () => markSwitches(heft.scene) },
@@ -621,6 +774,10 @@ const jobs = [
   { name: "graph", every: SLOW_EVERY_MS, changes: true, run: () => drawGraph(heft.scene) },
 ];
 for (const job of jobs) { job.last = -Infinity; job.took = 0; }
+function addChartJob(name, chart) {
+  jobs.push({ name, every: CHART_EVERY_MS, chart: true, run: () => chart.flush(), last: -Infinity, took: 0 });
+}
+for (const [name, chart] of Object.entries(charts)) addChartJob(name, chart);
 
 function sceneShape(scene) {
   return JSON.stringify([scene.switches, scene.links.map((l) => l.health),
@@ -677,6 +834,7 @@ function onMessage(event) {
     if (ring.length > RECEIPTS) ring.splice(0, ring.length - RECEIPTS);
   }
   if (message.type === "hello") {
+    declare(message.scalars);
     if (heft.epoch !== null && message.epoch !== heft.epoch) {
       for (const chart of Object.values(charts)) chart.reset();
     }
@@ -708,9 +866,9 @@ function connect() {
 
 // ------------------------------------------------------------------------ controls
 function exportCsv() {
-  const lines = ["chart,trace,t_s,value"];
+  const lines = ["chart,trace,t_s,value,half_95"];
   for (const [name, chart] of Object.entries(charts)) {
-    for (const [trace, t, value] of chart.visible()) lines.push(`${name},"${trace}",${t},${value}`);
+    for (const [trace, t, value, h] of chart.visible()) lines.push(`${name},"${trace}",${t},${value},${h}`);
   }
   return lines.join("\n") + "\n";
 }

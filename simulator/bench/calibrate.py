@@ -53,7 +53,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 from agent.platform.cli_helpers import PROG, HelpFormatter
-from simulator.results import PLANAR_95, SCALAR_95, distance2
+from agent.platform.evaluation import PLANAR_95, SCALAR_95, distance2
 
 CHI2_SCALAR = SCALAR_95**2
 """χ²₁'s 95 % quantile: a scalar within 1.96 standard deviations."""

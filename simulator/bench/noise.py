@@ -124,26 +124,30 @@ class NoiseSettings:
     published-variance``)."""
     max_time_s: float = 60.0
     spin_speed: float = 1.0
-    """m/s: Step 1's spin-up target, for both estimators (the scenarios' default is 0.5: a
-    faster turn gives the arcs and the angle fits more signal against the same noise)."""
+    """m/s: Step 1's spin-up target, for both estimators (the default; the paper's scenario
+    runs its estimators at 0.5: a faster turn gives the arcs and the angle fits more signal
+    against the same noise)."""
     spin_gain: float = 10.0
-    """N s/m: the spin-up's gain, for both estimators (the default, 4, holds a turn this fast
-    only well below its target against the damping that keeps the floor bounded)."""
+    """N s/m: the spin-up's gain, for both estimators (the default; 4, the paper's scenario's,
+    holds a turn this fast only well below its target against the damping that keeps the floor
+    bounded)."""
     push_force: float = 2.0
-    """N: the robust estimators' common push (the paper's size theirs by eq. 17)."""
+    """N: the robust estimators' common push, the default (the paper's size theirs by eq. 17)."""
     push_flip_s: float = 2.0
-    """s: how often the push reverses, for both estimators: against noise, the COM's
-    displacement, ``n f T²/8m``, is the mass's signal; the speed it swings by, ``n f T/2m``,
-    is bounded by the floor."""
+    """s: how often the push reverses, for both estimators (the default; the paper's scenario
+    runs its estimators at 1): against noise, the COM's displacement, ``n f T²/8m``, is the
+    mass's signal; the speed it swings by, ``n f T/2m``, is bounded by the floor."""
     inertia_brake_s: float = 0.0
     """s: the robust estimators' first braking in Step 4 (``heft bench noise --generated``
-    sets :data:`GENERATED_INERTIA_BRAKE_S`; the paper's scenario speeds up first: its ``|ω|``
-    stays within 1 rad/s, and its ``z_ij`` are better for the faster turn)."""
+    sets :data:`GENERATED_INERTIA_BRAKE_S`, the default; the paper's scenario speeds up first,
+    as ``paper-noisy.toml`` does: its ``|ω|`` stays within 1 rad/s, and its ``z_ij`` are better
+    for the faster turn)."""
     push_damping: float = 0.0
     """N s/m: the robust estimators' damping of the centroid's velocity during the push
-    (``heft bench noise --generated`` sets :data:`GENERATED_PUSH_DAMPING`). The paper's
-    scenario does without: its push is sized for its load, and the damping takes from the
-    mass's signal (``heft bench noise``: m 0.76 % with it, 0.58 % without)."""
+    (``heft bench noise --generated`` sets :data:`GENERATED_PUSH_DAMPING`, the default). The
+    paper's scenario does without, as ``paper-noisy.toml`` does: its push is sized for its
+    load (``heft bench noise``, measured before the team agreed on its rotation and mass: m
+    0.76 % with it, 0.58 % without)."""
 
     @property
     def noise_text(self) -> str:

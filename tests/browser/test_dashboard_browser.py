@@ -2,12 +2,15 @@
 Playwright) opens the page while the paper's scenario runs over Zenoh (a router, the plant and
 four agent processes, lockstep), and the page itself must show m̂ and Ĵ converging to the
 truth, the top view moving and the phase timeline reaching "done". The run is recorded on the
-way; replayed from the page, it shows the same final table as live.
+way; replayed from the page, it shows the same final table as live. A robust run of the noisy
+scenario, replayed, shows how sure each robot is: a 95 % band around each m̂ and ``±`` in the
+table.
 
 In CI (``CI`` set) a missing Chromium is a failure, never a skip."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import subprocess
@@ -17,13 +20,16 @@ from pathlib import Path
 
 import pytest
 
+from agent.platform.evaluation import SCALAR_95
 from agent.platform.faults import FaultSettings
 from agent.platform.protocol import Control, Keys, encode
 from agent.platform.zenoh_session import ZenohSettings, open_session
 from dashboard.companion import RunCompanion
+from dashboard.display import Display
 from simulator.launcher import robot_toml
 from simulator.scenario import load_scenario
 from tests.helpers.paths import PAPER, ROOT
+from tests.helpers.recordings import record_run
 
 pytestmark = pytest.mark.slow
 CHROMIUM = "/usr/bin/chromium"
@@ -36,6 +42,7 @@ BROWSER_ARGS = [
     "--disable-sync",
 ]
 SCREENSHOT = ROOT / "out" / "dashboard.png"
+NOISY = ROOT / "simulator" / "scenarios" / "paper-noisy.toml"
 
 
 def chromium():
@@ -51,6 +58,19 @@ def chromium():
             )
         pytest.skip(f"needs playwright and {CHROMIUM}")
     return sync_playwright
+
+
+@contextlib.contextmanager
+def browser_page(sync_playwright, url: str):
+    """A headless Chromium page of 1280×800 opened on ``url``, and the errors it raises."""
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors: list[str] = []
+        page.on("pageerror", lambda err: errors.append(str(err)))
+        page.goto(url)
+        yield page, errors
+        browser.close()
 
 
 def free_port() -> int:
@@ -113,6 +133,26 @@ CHART_DRAWN = """(name) => {
 }"""
 
 
+BANDS = """(name) => window.heft.charts[name].bands().map((b) => ({
+  name: b.name, count: b.x.length, lower: b.lower[b.lower.length - 1],
+  upper: b.upper[b.upper.length - 1] }))"""
+BAND_PIXELS = """(name) => {
+  // the plot's pixels that change when uPlot's bands are hidden: those the bands painted
+  const u = window.heft.charts[name].plot, { left, top, width, height } = u.bbox;
+  const edges = u.bands.flatMap((b) => b.series);
+  const pixels = () => u.ctx.getImageData(left, top, width, height).data;
+  const shown = pixels();
+  u.batch(() => edges.forEach((i) => u.setSeries(i, { show: false })));
+  const hidden = pixels();
+  u.batch(() => edges.forEach((i) => u.setSeries(i, { show: true })));
+  let changed = 0;
+  for (let k = 0; k < shown.length; k += 4) {
+    if ([0, 1, 2, 3].some((c) => shown[k + c] !== hidden[k + c])) changed += 1;
+  }
+  return { bands: u.bands.length, changed, of: shown.length / 4 };
+}"""
+
+
 def wait_for(predicate, timeout_s: float, what: str, display=None) -> None:
     deadline = time.monotonic() + timeout_s
     while not predicate():
@@ -154,12 +194,7 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
         processes = None
         try:
             companion.on_ready(router, team)
-            with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
-                page = browser.new_page(viewport={"width": 1280, "height": 800})
-                errors: list[str] = []
-                page.on("pageerror", lambda err: errors.append(str(err)))
-                page.goto(display.url)
+            with browser_page(sync_playwright, display.url) as (page, errors):
                 page.wait_for_function("window.heft && window.heft.frames > 0", timeout=20_000)
                 page.evaluate(TOP_SAMPLER)
                 started = time.monotonic()
@@ -206,7 +241,9 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
                 page.screenshot(path=str(SCREENSHOT))
                 assert SCREENSHOT.stat().st_size > 20_000
                 csv = page.evaluate("window.heft.csv()")
-                assert csv.startswith("chart,trace,t_s,value\n") and "mass" in csv
+                assert csv.startswith("chart,trace,t_s,value,half_95\n") and "mass" in csv
+                # The paper's estimators publish no uncertainty: no band, no ±.
+                assert page.evaluate(BANDS, "mass") == [] and "±" not in page.inner_text("#table")
 
                 # Replayed from the page, as fast as it goes: the same final table.
                 started = time.monotonic()
@@ -227,8 +264,49 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
                 )
                 assert page.inner_text("#source").startswith("REPLAY")
                 assert errors == []
-                browser.close()
         finally:
             if processes is not None:
                 processes.stop()
             companion.close()
+
+
+def test_a_robust_runs_page_shows_how_sure_each_robot_is(tmp_path: Path) -> None:
+    """The noisy scenario's robust run (in one process), recorded and replayed into the page:
+    each m̂ has its 95 % band, painted by uPlot, as wide as ``±1.96 σ`` of what the robot
+    published; the table gives ``±`` beside each value and whether the truth lies inside."""
+    from simulator.inprocess import run_inprocess
+
+    sync_playwright = chromium()
+    scenario = load_scenario(NOISY)
+    outcome = run_inprocess(scenario)
+    assert outcome.converged
+    path = tmp_path / "noisy.mcap"
+    record_run(path, scenario, outcome, team="noisy")
+    display = Display.open(None, port=0, recording=path)
+    try:
+        display.hub.replay(path, speed=0)
+        with browser_page(sync_playwright, display.url) as (page, errors):
+            page.wait_for_function(
+                "window.heft.scene && window.heft.scene.table.final", timeout=20_000
+            )
+            page.wait_for_timeout(600)  # the charts' last redraw
+            final = outcome.final.estimates
+            bands = {band["name"]: band for band in page.evaluate(BANDS, "mass")}
+            assert sorted(bands) == [f"m̂ robot {i}" for i in range(1, 5)]
+            for i, est in final.items():
+                band, half = bands[f"m̂ robot {i}"], SCALAR_95 * est.mass_std
+                assert band["count"] > 20
+                assert band["lower"] == pytest.approx(est.mass - half, abs=1e-8)
+                assert band["upper"] == pytest.approx(est.mass + half, abs=1e-8)
+            painted = page.evaluate(BAND_PIXELS, "mass")
+            assert painted["bands"] == 4 and painted["changed"] > 0.02 * painted["of"], painted
+            # The table: "±" under each m̂, Ĵ, c and z; the truth inside each (✓), as here.
+            table = page.inner_text("#table")
+            assert table.count("±") == 4 * 4 and table.count("✓") == 4 * 4, table
+            for i, est in final.items():
+                cell = page.inner_text(f"#table tr:nth-child({i + 1}) td:nth-child(3)")
+                assert cell.split() == [f"{est.mass:.4f}", f"±{SCALAR_95 * est.mass_std:.4f}"]
+            page.screenshot(path=str(SCREENSHOT.with_name("dashboard-robust.png")))
+            assert errors == []
+    finally:
+        display.close()

@@ -18,6 +18,7 @@ from simulator.launcher import run_zenoh
 from simulator.plant import Plant
 from simulator.results import floor_check, format_table
 from simulator.scenario import load_scenario
+from tests.helpers.accuracy import assert_same_estimates
 from tests.helpers.paths import PAPER
 
 
@@ -77,3 +78,18 @@ def test_the_floor_over_zenoh_is_the_in_process_runs(paper_run, clock: str) -> N
     assert f"from t = 0 to {there.final.time_s:.2f} s" in format_table(there)
     ticks = [sample.truth.tick for sample in there.history]
     assert ticks[0] < 10 and ticks[-1] == there.final.truth.tick and len(ticks) > 100, ticks
+
+
+@pytest.mark.slow
+def test_the_ground_over_zenoh_is_the_in_process_runs() -> None:
+    """On a floor with friction (paper-floor.toml's casters), lockstep over Zenoh ends at the
+    in-process run's instant with the same truth, the ground's figures and the friction the
+    plant applied included, and the same estimates."""
+    scenario = load_scenario(PAPER.parent / "paper-floor.toml")
+    here = run_inprocess(scenario)
+    there = run_zenoh(scenario, log_stream=io.StringIO())
+    assert there.final.truth == here.final.truth
+    truth = there.final.truth
+    assert (truth.ground_coulomb, truth.ground_static) == (0.02, 0.03)
+    assert truth.friction_radius > 0.0 and truth.friction_force != (0.0, 0.0)
+    assert_same_estimates(here, there)

@@ -24,17 +24,10 @@ and each family's own, of Steps 1, 4, 5 and 7 (:mod:`agent.algorithm.paper`,
 
 from __future__ import annotations
 
-import math
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 Covariance = tuple[tuple[float, ...], ...]
 """A symmetric matrix, row by row, in the units of the estimate squared."""
-
-
-def largest_std(xx: float, xy: float, yy: float) -> float:
-    """The standard deviation along the least certain axis of a planar covariance
-    ``[[xx, xy], [xy, yy]]``: the square root of its larger eigenvalue."""
-    return math.sqrt(max(0.5 * (xx + yy) + math.hypot(0.5 * (xx - yy), xy), 0.0))
 
 
 E_co = TypeVar("E_co", covariant=True)

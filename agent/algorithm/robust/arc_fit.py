@@ -47,10 +47,10 @@ from __future__ import annotations
 
 import math
 
-from agent.algorithm.estimation.estimator import Covariance, largest_std
+from agent.algorithm.estimation.estimator import Covariance
 from agent.algorithm.robust.least_squares import LeastSquares, Solution
 from agent.algorithm.robust.uncertainty import packed
-from agent.platform.geometry import Vec2, angle_between
+from agent.platform.geometry import Vec2, angle_between, largest_std
 
 DIRECTION_VARIANCE = 1.5
 """Factor on the direction filter's variance ``P`` when published: the filter takes the

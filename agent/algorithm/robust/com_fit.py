@@ -29,9 +29,8 @@ of ``Ĵ``, which scales ``c`` (``c ∝ J``).
 
 from __future__ import annotations
 
-from agent.algorithm.estimation.estimator import largest_std
 from agent.algorithm.robust.least_squares import RunFit
-from agent.platform.geometry import Vec2, arc_factor, rotate
+from agent.platform.geometry import Vec2, arc_factor, largest_std, rotate
 
 
 class ComFit(RunFit):

@@ -7,10 +7,10 @@
   turn on its floor);
 - *push*: the configured ``push_force``, the same for every robot whatever its Ĵ; with
   ``push_damping = b`` each robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity
-  (which every robot estimates alike), so that a light load's speed stays within about ``f/b``
-  and a heavy one's drift dies out (Steps 5 and 7 take the force as commanded); after an odd
-  number of load changes the push begins the other way, swinging the load back towards where it
-  started;
+  at the estimation instant (which every robot estimates alike), so that a light load's speed
+  stays within about ``f/b`` and a heavy one's drift dies out (Steps 5 and 7 take the force as
+  commanded); after an odd number of load changes the push begins the other way, swinging the
+  load back towards where it started;
 - *done* (with ``change_threshold`` > 0): the team keeps watching the load, in cycles on the
   agreed clock: a gap of ``monitor_gap_s`` in which each robot damps the COM's velocity,
   ``−b ṗ̂_C`` (Step 6's estimate: the load keeps its turn, which Step 5's fit needs, and loses
@@ -28,7 +28,7 @@ from agent.algorithm.interfaces import OwnEstimates
 from agent.algorithm.phase_machine import Law, PhaseMachine, Ready, _never_ready
 from agent.algorithm.safety import saturate
 from agent.algorithm.tuning import AgentConfig
-from agent.platform.geometry import Vec2, rotate
+from agent.platform.geometry import Vec2
 from agent.platform.protocol import Phase
 
 
@@ -65,12 +65,13 @@ class RobustPhases(PhaseMachine):
     def _pushing(self, k: int, own: OwnEstimates, velocity: Vec2, push: Vec2) -> Vec2:
         """The push with ``push_damping``'s ``−b ṗ̂_G`` added (recorded for Steps 5 and 7)."""
         b = self.tuning.robust.push_damping
-        if not b > 0.0:
+        if not b > 0.0 or own.velocity is None:
             return push
-        # ṗ_G = ṗ_Ci − ω Q z_i, z_i turned to t_k from the estimation instant.
-        omega = own.omega or 0.0
-        z = rotate(own.centroid, omega * (k - own.instant) * self.dt)
-        centroid_velocity = (velocity[0] + omega * z[1], velocity[1] - omega * z[0])
+        # ṗ_G = ṗ_Ci − ω Q z_i, all three at the estimation instant: every robot then adds the
+        # same force, as Steps 5 and 7 take it. (This tick's ṗ_Ci with the instant's ω would
+        # differ from robot to robot by the change of ω times z_i, a torque the fits miss.)
+        omega, v, z = own.omega or 0.0, own.velocity, own.centroid
+        centroid_velocity = (v[0] + omega * z[1], v[1] - omega * z[0])
         force = saturate(
             (push[0] - b * centroid_velocity[0], push[1] - b * centroid_velocity[1]),
             self.tuning.max_force,

@@ -18,16 +18,16 @@ class RobustTuning:
     inertia_flip_s: float = bounded(1.0, 0, 60, "s", min_ticks=1)
     """s: Step 4 speeds up for this long, then brakes for as long, in turn (at most
     ``inertia_flip_s`` × the load's angular acceleration above the turn it had)."""
-    inertia_brake_s: float = bounded(0.0, 0, 60, "s")
+    inertia_brake_s: float = bounded(0.5, 0, 60, "s")
     """s: Step 4 first brakes for this long. Half of ``inertia_flip_s`` makes ω swing about the
     turn the load had, by half as much as speeding up first: for compact, light loads, whose
     turn would leave the floor; a slower turn gives Step 1's direction filters less signal.
     0: speed up first."""
-    push_force: float = bounded(3.0, 0, 1000, "N", open_low=True)
+    push_force: float = bounded(2.0, 0, 1000, "N", open_low=True)
     """N: every robot pushes with exactly this (at most ``max_force``): the robots' Ĵ differ by
     their noise, and eq. (17)'s ``f̄_y Ĵ/n`` would make their forces differ too, where Steps 5
     and 7 need one common force."""
-    push_damping: float = bounded(0.0, 0, 1000, "N s/m")
+    push_damping: float = bounded(2.0, 0, 1000, "N s/m")
     """N s/m: each robot adds ``−b ṗ̂_G`` to the push (the centroid's velocity, which every
     robot estimates alike from Step 2): the COM's speed then stays within about ``f / b`` and a
     drift dies out, whatever the load's mass; Steps 5 and 7 take the force as commanded. 0: the

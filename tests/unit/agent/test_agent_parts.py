@@ -24,14 +24,17 @@ from agent.algorithm.inbox import HISTORY_TICKS, Inbox
 from agent.algorithm.paper.tuning import PaperTuning
 from agent.algorithm.phase_machine import PhaseMachine
 from agent.algorithm.robust.tuning import RobustTuning
-from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
+from agent.algorithm.tuning import PAPER_REFERENCE, AgentConfig, AgentTuning, Estimators
+from agent.platform.config import from_table
 from agent.platform.geometry import Vec2, cross, rotate
 from agent.platform.protocol import Barrier, Measurement, Phase, Share
 from agent.platform.resend import ResendTimeout
 from agent.platform.team import ConsensusState
 
 DT = 0.01
-TUNING = AgentTuning(kick_duration_s=0.05, switch_margin_ticks=2)
+TUNING = replace(
+    from_table(AgentTuning, PAPER_REFERENCE, "agent"), kick_duration_s=0.05, switch_margin_ticks=2
+)
 
 
 def measurement(robot: int, tick: int, velocity: Vec2 = (0.0, 0.0)) -> Measurement:
@@ -104,6 +107,7 @@ class Own:
     omega: float | None = None
     measured: int | None = None
     zdot: dict[int, Vec2] = field(default_factory=dict)
+    velocity: Vec2 | None = None
     ready: set[Phase] = field(default_factory=set)
     """The phases whose estimates have settled."""
     centroid: Vec2 = (0.0, 0.0)
@@ -313,20 +317,25 @@ def test_the_push_reverses_on_the_agreed_clock():
 
 
 def test_the_robust_push_damps_the_centroids_velocity_and_says_by_how_much():
-    """``push_damping = b``: each robot adds ``−b ṗ̂_G``, ``ṗ̂_G = ṗ_Ci − ω Q z_i``, to the
-    common force, and the pipeline's fits are told what was added, tick by tick."""
+    """``push_damping = b``: each robot adds ``−b ṗ̂_G``, ``ṗ̂_G = ṗ_Ci − ω Q z_i`` all at the
+    estimation instant (so that every robot adds the same force, whatever ω does until the
+    tick), to the common force, and the pipeline's fits are told what was added, tick by
+    tick."""
     m = machine(
         estimator=Estimators.ROBUST, push_force=2.0, push_damping=2.0, push_direction=(0.0, 1.0)
     )
-    own = Own(moment=1.0, omega=0.5, centroid=(0.4, 0.0), instant=50)
+    own = Own(moment=1.0, omega=0.5, centroid=(0.4, 0.0), instant=49, velocity=(0.1, 0.2))
     enter(m, Phase.PUSH, 50, own)
-    # ṗ̂_G = (0.1 + 0.5 · 0, 0.2 − 0.5 · 0.4) = (0.1, 0)
-    assert m.force(50, own, (0.1, 0.2)) == pytest.approx((-0.2, 2.0))
-    # at rest at t_51, z_i turned by ω Δt since the instant: ṗ̂_G = −ω Q z_i ≈ (0.001, −0.2)
-    assert m.force(51, own, (0.0, 0.0)) == pytest.approx((-0.002, 2.4), abs=1e-5)
+    # ṗ̂_G = (0.1 + 0.5 · 0, 0.2 − 0.5 · 0.4) = (0.1, 0), whatever the tick's own velocity
+    assert m.force(50, own, (0.7, -0.3)) == pytest.approx((-0.2, 2.0))
+    # at rest at the next instant: ṗ̂_G = −ω Q z_i = (0, −0.2)
+    own.instant, own.velocity = 50, (0.0, 0.0)
+    assert m.force(51, own, (0.3, 0.3)) == pytest.approx((0.0, 2.4))
     assert m.mean_push_damping(50, 51) == pytest.approx((-0.2, 0.0))
-    assert m.mean_push_damping(50, 52) == pytest.approx((-0.101, 0.2), abs=1e-5)
+    assert m.mean_push_damping(50, 52) == pytest.approx((-0.1, 0.2))
     assert m.mean_push_damping(60, 61) == (0.0, 0.0)  # no force commanded then: nothing added
+    own.velocity = None  # no velocity at the instant: nothing to damp
+    assert m.force(52, own, (0.3, 0.3)) == pytest.approx((0.0, 2.0))
     paper = machine(push_damping=2.0, push_min_force=2.0, push_direction=(0.0, 1.0))
     enter(paper, Phase.PUSH, 50, own)
     assert paper.force(50, own, (0.1, 0.2)) == pytest.approx((0.0, 2.0))  # robust only

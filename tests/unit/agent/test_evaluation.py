@@ -4,11 +4,24 @@ estimates, the worst over a team, and the final instant."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
 
-from agent.platform.evaluation import ERROR_KEYS, final_instant, robot_errors, team_errors
+from agent.platform.evaluation import (
+    ERROR_KEYS,
+    PLANAR_95,
+    SCALAR_95,
+    covariance,
+    distance2,
+    edges_interval,
+    final_instant,
+    planar_interval,
+    robot_errors,
+    scalar_interval,
+    team_errors,
+)
 from agent.platform.protocol import Estimates, Phase, Truth
 
 # Three contacts around a COM at the origin: p_G = (0, 1/3), z_C = p_G − p_C = (0, 1/3).
@@ -110,3 +123,54 @@ def test_the_final_instant_is_the_first_at_which_every_robot_is_done() -> None:
     assert final_instant([team[0], pushing, team[2]]) is None
     assert final_instant([team[0], None, team[2]]) is None  # robot 2 has said nothing
     assert final_instant([]) is None
+
+
+# ------------------------------------------------------------------------------ intervals
+def test_a_scalars_95_percent_interval_is_1_96_standard_deviations() -> None:
+    assert scalar_interval(4.0, 0.5, None) == (SCALAR_95 * 0.5, None)  # no truth: not judged
+    half, inside = scalar_interval(4.0 + 0.97, 0.5, 4.0)
+    assert half == pytest.approx(0.98, abs=1e-4) and inside is True
+    assert scalar_interval(4.0 + 0.99, 0.5, 4.0)[1] is False
+    assert scalar_interval(3.01, 0.5, 4.0)[1] is False  # below as above
+    assert scalar_interval(None, 0.5, 4.0) == (None, None)  # no estimate
+    assert scalar_interval(4.0, None, 4.0) == (None, None)  # no uncertainty published
+
+
+def test_a_vectors_95_percent_interval_is_its_ellipse() -> None:
+    cov = (0.04, 0.0, 0.01)  # σ 0.2 m along x, 0.1 m along y
+    half, inside = planar_interval((1.0, 0.0), cov, None)
+    assert half == pytest.approx(math.sqrt(PLANAR_95) * 0.2) and inside is None
+    # Along y, the ellipse reaches 0.245 m: 0.24 is inside, 0.25 not, whatever its x width.
+    assert planar_interval((1.0, 0.24), cov, (1.0, 0.0))[1] is True
+    assert planar_interval((1.0, 0.25), cov, (1.0, 0.0))[1] is False
+    assert distance2((0.2, 0.0), cov) == pytest.approx(1.0)
+
+
+def test_the_edges_interval_is_the_widest_and_holds_when_every_edge_is_inside() -> None:
+    # Robot 2's true z_21 = (2, 0) and z_23 = (1, −1); its z_21 is 1 σ off.
+    est = estimates(
+        2,
+        relative_positions={1: (2.01, 0.0), 3: (1.0, -1.0)},
+        relative_positions_cov={1: (1e-4, 0.0, 1e-4), 3: (4e-4, 0.0, 1e-4)},
+    )
+    half, inside = edges_interval(est, TRUTH)
+    assert half == pytest.approx(math.sqrt(PLANAR_95) * 0.02) and inside is True
+    assert edges_interval(est, None) == (half, None)
+    wrong = dataclasses.replace(est, relative_positions={1: (2.05, 0.0), 3: (1.0, -1.0)})
+    assert edges_interval(wrong, TRUTH) == (half, False)  # edge 1 is 5 σ off
+    assert edges_interval(estimates(1), TRUTH) == (None, None)  # no covariance published
+
+
+@pytest.mark.parametrize("std", [math.nan, math.inf, -math.inf, -1e-9, 1e308], ids=str)
+def test_a_standard_deviation_that_cannot_be_one_gives_no_interval(std) -> None:
+    assert scalar_interval(4.0, std, 4.0) == (None, None)  # 1e308: 1.96 σ is not finite
+
+
+@pytest.mark.parametrize(
+    "cov",
+    [(1.0, 2.0, 1.0), (-1.0, 0.0, 1.0), (math.nan, 0.0, 1.0), (1.0, math.inf, 1.0), (1.0, 0.0)],
+    ids=str,
+)
+def test_a_covariance_that_cannot_be_one_gives_no_interval(cov) -> None:
+    assert covariance(cov) is None
+    assert planar_interval((1.0, 0.0), cov, (1.0, 0.0)) == (None, None)

@@ -126,7 +126,7 @@ def test_a_familys_keys_live_in_its_own_table(table: dict, message: str) -> None
 def test_a_scenario_with_an_old_key_is_refused_naming_its_new_place(tmp_path: Path) -> None:
     text = (ROOT / "simulator" / "scenarios" / "paper.toml").read_text(encoding="utf-8")
     old = tmp_path / "old.toml"
-    old.write_text(text.replace("[agent]", '[agent]\nestimator = "robust"\npush_force = 2.0'))
+    old.write_text(text.replace('estimator = "paper"', 'estimator = "robust"\npush_force = 2.0'))
     with pytest.raises(ScenarioError, match=r"agent\.robust\.push_force"):
         load_scenario(old)
     new = tmp_path / "new.toml"

@@ -26,6 +26,7 @@ from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds
 from agent.platform.heft import main
 from agent.platform.zenoh_session import ZenohSettings
 from bridge.config import CanSettings
+from simulator.polygon import polygon_diameter
 from simulator.scenario import (
     MAX_COORDINATE,
     MAX_POSITION,
@@ -37,8 +38,8 @@ from simulator.scenario import (
     RunSettings,
     Sensors,
     _BodyTable,
+    _GroundTable,
     load_scenario,
-    polygon_diameter,
 )
 from tests.helpers.bad_input import paper, refused, robot_file, scenario_file
 from tests.helpers.paths import PAPER, ROOT
@@ -239,6 +240,7 @@ SCENARIO_CASES = [
     *_cases("sensors", Sensors),
     *_cases("actuators", Actuators),
     *_cases("floor", Floor),
+    *_cases("ground", _GroundTable),
     *_cases("run", RunSettings),
     *_cases("agent", AgentTuning),
     *_cases("agent.paper", PaperTuning),
@@ -428,6 +430,7 @@ def _documented_limits() -> str:
         ("sensors", Sensors),
         ("actuators", Actuators),
         ("floor", Floor),
+        ("ground", _GroundTable),
         ("run", RunSettings),
         ("events", LoadChange),
         ("agent", AgentTuning),

@@ -85,7 +85,7 @@ def test_robot_file_loads_as_documented(robot: int, deployed) -> None:
     assert config.zenoh.listen == ()
     assert config.zenoh.certificate.endswith(f"/robot-{robot}.pem") and not config.zenoh.allow_plain
     assert config.faults == FaultSettings()  # no injected faults on robots
-    assert config.tuning == AgentTuning()  # the paper's gains
+    assert config.tuning == AgentTuning()  # the defaults: the robust estimators, for real robots
 
 
 @pytest.mark.parametrize("robot", sorted(ROBOT_FILES))
@@ -123,8 +123,11 @@ def test_neighbours_are_symmetric_and_match_the_paper_graph(deployed, paper) -> 
 
 @pytest.mark.parametrize("robot", sorted(ROBOT_FILES))
 def test_robot_file_is_what_the_launcher_writes_for_the_paper_team(robot, deployed, paper) -> None:
+    # The robots run the default estimators, made for real sensors and drives, where the
+    # paper's scenario runs the paper's, the reference: its load and team with the defaults.
+    team = dataclasses.replace(paper, agent=AgentTuning())
     generated = load_config_text(
-        robot_toml(robot, paper, "paper", "realtime", DEFAULT_ROUTER, FaultSettings())
+        robot_toml(robot, team, "paper", "realtime", DEFAULT_ROUTER, FaultSettings())
     )  # (but for the [zenoh] table: the robots' is secured, the launcher's on loopback)
     assert dataclasses.replace(deployed[robot], zenoh=generated.zenoh) == generated
 
@@ -309,7 +312,7 @@ def test_launcher_robot_toml_round_trips(robot: int, paper) -> None:
         tuning=paper.agent,
     )
     assert config.neighbours == {1: (2,), 2: (1, 3), 3: (2, 4), 4: (3,)}[robot]
-    assert config.tuning == AgentTuning()
+    assert config.tuning == paper.agent != AgentTuning()  # the scenario's: the paper's estimators
 
 
 @given(st.text(st.characters(exclude_categories=("Cs",))))

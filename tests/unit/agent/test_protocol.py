@@ -179,6 +179,13 @@ TRUTH = Truth(
     largest_travel=0.25,
     largest_speed=0.75,
     largest_omega=1.0,
+    ground_coulomb=0.02,
+    ground_static=0.03,
+    ground_viscous=0.5,
+    friction_radius=1.2,
+    viscous_radius2=1.6,
+    friction_force=(-0.9, 0.3),
+    friction_torque=0.4,
 )
 CONTROL = Control("stop")
 PLANT_STATUS = PlantStatus(tick=6000, time_s=60.0, clock="realtime", lost=(2,), latency_ms_p50=0.4)
@@ -444,6 +451,28 @@ def test_json_messages_are_checked_too() -> None:
     assert "clock" in str(rejects(PlantStatus, encode(_with(PLANT_STATUS, clock="sundial"))))
     assert "positive" in str(rejects(Truth, encode(_with(TRUTH, mass=-5.0))))
     assert "largest_speed" in str(rejects(Truth, encode(_with(TRUTH, largest_speed=-0.1))))
+
+
+NOT_GROUNDS = {
+    "a negative coulomb": dict(ground_coulomb=-0.01),
+    "a static below the coulomb": dict(ground_static=0.01),
+    "a negative viscous": dict(ground_viscous=-0.5),
+    "a negative friction radius": dict(friction_radius=-1.0),
+    "a mean radius above its root mean square": dict(friction_radius=1.3),
+}
+
+
+@pytest.mark.parametrize("changes", NOT_GROUNDS.values(), ids=NOT_GROUNDS.keys())
+def test_a_truths_ground_out_of_its_domain_is_refused(changes: dict) -> None:
+    assert "truth" in str(rejects(Truth, encode(_with(TRUTH, **changes))))
+
+
+def test_a_truth_without_its_ground_is_refused() -> None:
+    """Every field is on the wire: a truth of wire version 8 (no ground) does not decode as one
+    of today's, even under today's header."""
+    body = json.loads(bytes(encode(TRUTH))[3:])
+    del body["friction_torque"]
+    assert "keys" in str(rejects(Truth, header(Truth) + json.dumps(body).encode()))
 
 
 NOT_GEOMETRIES = {

@@ -274,7 +274,8 @@ def _fields(detectors: SettleDetectors) -> list[SettleDetector]:
 def test_the_estimator_is_chosen_by_name() -> None:
     tuning = from_table(AgentTuning, {"estimator": "robust"}, "agent")
     assert tuning.estimator is Estimators.ROBUST
-    assert AgentTuning().estimator is Estimators.PAPER
+    assert AgentTuning().estimator is Estimators.ROBUST  # the default, for real robots
+    assert from_table(AgentTuning, {"estimator": "paper"}, "agent").estimator is Estimators.PAPER
     assert 'estimator = "robust"' in to_toml(tuning)
     assert from_table(AgentTuning, {"estimator": "robust"}, "agent") == tuning
     with pytest.raises(ConfigError, match="agent.estimator: expected one of paper, robust"):

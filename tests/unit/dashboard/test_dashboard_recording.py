@@ -11,11 +11,10 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from agent.platform.protocol import Command, Keys
-from dashboard.recorder import Recorder
 from dashboard.replay import Recording, RecordingError, Replayer
 from dashboard.state import TeamState
 from tests.helpers.paths import PAPER
+from tests.helpers.recordings import record_run
 
 
 @pytest.fixture(scope="module")
@@ -25,21 +24,6 @@ def paper_run():
 
     scenario = load_scenario(PAPER)
     return scenario, run_inprocess(scenario)
-
-
-def record_run(path: Path, scenario, outcome, team: str = "paper") -> None:
-    """The run's recorded instants as a recording, 10 ms of simulated time apart, after the
-    load's geometry (as the plant publishes it when it comes up)."""
-    keys = Keys(team)
-    start = 1_700_000_000_000_000_000
-    with Recorder(path, team) as recorder:
-        recorder.write(keys.geometry(), scenario.load_geometry(), start)
-        for sample in [*outcome.history, outcome.final]:
-            stamp = start + round(sample.truth.time_s * 1e9)
-            recorder.write(keys.truth(), sample.truth, stamp)
-            for i, est in sample.estimates.items():
-                recorder.write(keys.estimate(i), est, stamp)
-                recorder.write(keys.force(i), Command(i, sample.truth.tick, (1.0, 0.0)), stamp)
 
 
 def test_a_replayed_recording_gives_the_runs_final_table(tmp_path: Path, paper_run) -> None:

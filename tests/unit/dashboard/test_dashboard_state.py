@@ -103,6 +103,19 @@ def test_the_charts_converge_to_the_truth_and_the_final_table_is_the_runs(paper_
         assert math.dist(com, top["com"]) < 1e-3, robot
 
 
+def test_the_papers_estimators_publish_no_uncertainty_and_get_no_band(paper_run) -> None:
+    scenario, outcome = paper_run
+    state = TeamState("paper", scenario.load_geometry())
+    feed(state, outcome)
+    assert {len(p) for points in state.all_series().values() for p in points} == {2}
+    for row in state.final["robots"].values():
+        assert set(row["intervals"]) == {"mass", "moment", "contact_to_com", "relative_positions"}
+        assert all(interval == [None, None] for interval in row["intervals"].values())
+    assert state.top_view()["com_ellipses"] == {}
+    page = state.page_scene(100.0)["table"]["robots"]
+    assert all(row["intervals"] == {} for row in page.values())
+
+
 def test_the_pages_scene_is_the_scene_less_what_the_page_does_not_draw(paper_run) -> None:
     scenario, outcome = paper_run
     state = TeamState("paper", scenario.load_geometry())

@@ -13,10 +13,13 @@ figures (m 0.0003 %, J 0.013 %, 0.15 mm)."""
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
 import pytest
 
 from agent.algorithm.tuning import Estimators
+from agent.platform.heft import main
 from agent.platform.protocol import Phase
 from simulator.inprocess import run_inprocess
 from simulator.results import format_table, intervals, results_dict
@@ -44,7 +47,9 @@ def _scenario(seed: int, estimator: Estimators, noise: bool = True, max_time_s: 
             spin_speed=1.0,
             spin_gain=10.0,
             push_flip_s=2.0,
-            robust=dataclasses.replace(paper.agent.robust, push_force=2.0),
+            robust=dataclasses.replace(
+                paper.agent.robust, push_force=2.0, push_damping=0.0, inertia_brake_s=0.0
+            ),
         ),
     )
 
@@ -103,3 +108,30 @@ def test_the_robust_estimators_without_noise() -> None:
     assert worst["moment"] <= 3e-4, worst
     assert worst["contact_to_com"] <= 1e-3, worst
     assert worst["relative"] <= 1e-3, worst
+
+
+def test_a_scenario_without_an_agent_table_works_with_real_sensors_and_drives(
+    tmp_path: Path, capsys
+) -> None:
+    """The defaults are for real robots: the paper's load with the sensors' noise and the
+    drives of ``paper-noisy.toml`` (1 cm/s, 0.5 N, a 20 ms lag, 2 % gain errors) and no
+    ``[agent]`` table, run by ``heft run``, is done within 20 s simulated and on its floor;
+    every robot's m, J and ``contact_to_com`` hold the truth within their published 95 %
+    intervals, and its ``z_ij`` are within 1 cm."""
+    text = (PAPER.parent / "paper-noisy.toml").read_text(encoding="utf-8")
+    text = text[: text.index("# Agent gains and limits")]
+    assert "[agent" not in text and "[actuators]" in text
+    path, out = tmp_path / "noisy.toml", tmp_path / "results.json"
+    path.write_text(text, encoding="utf-8")
+    assert load_scenario(path).agent.estimator is Estimators.ROBUST  # the default
+    assert main(["run", str(path), "--out", str(out)]) == 0
+    capsys.readouterr()
+    results = json.loads(out.read_text(encoding="utf-8"))
+    assert results["converged"] and results["sim_time_s"] <= 20.0, results["sim_time_s"]
+    assert results["floor"]["within"], results["floor"]
+    for robot, rows in results["intervals"].items():
+        for name in ("mass", "moment", "contact_to_com"):
+            half_width, inside = rows[name]
+            assert half_width is not None and inside, (robot, name, rows)
+        assert rows["relative_positions"][0] is not None  # published
+    assert results["errors"]["relative_positions_m"] <= 0.01, results["errors"]

@@ -14,16 +14,16 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.algorithm.tuning import AgentTuning
-from agent.platform.config import ConfigError
+from agent.algorithm.tuning import PAPER_REFERENCE, AgentTuning, Estimators
+from agent.platform.config import ConfigError, from_table
 from agent.platform.heft import main
 from simulator.generate import GRAPH_KINDS, generate_scenario
+from simulator.polygon import polygon_area_centroid_moment
 from simulator.scenario import (
     Scenario,
     ScenarioError,
     load_scenario,
     parse_scenario,
-    polygon_area_centroid_moment,
     scenario_to_toml,
 )
 from tests.helpers.paths import PAPER
@@ -74,7 +74,9 @@ def test_paper_scenario_loads_with_the_papers_values() -> None:
     assert s.run.seed == 1
     assert s.period_s == pytest.approx(0.01)
     assert s.substeps == 10
-    assert s.agent == AgentTuning()
+    # the paper's estimators, the reference, and the defaults but for their keys
+    assert s.agent == from_table(AgentTuning, PAPER_REFERENCE, "agent")
+    assert s.agent.estimator is Estimators.PAPER and AgentTuning().estimator is Estimators.ROBUST
     assert s.body.position == (0.0, 0.0) and s.body.angle == 0.0
 
 
