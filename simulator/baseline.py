@@ -77,6 +77,8 @@ import numpy as np
 from scipy.sparse import csc_matrix, csr_matrix, diags
 from scipy.sparse.linalg import splu
 
+from agent.platform.protocol import GRAVITY
+
 MIN_SIGMA_V = 1e-6
 """m/s: the floor of the velocity noise used as a weight (a noise-free run has none)."""
 MIN_SIGMA_F = 1e-4
@@ -89,8 +91,6 @@ MAX_SLIP = 2.0
 slides (see the module docstring)."""
 MIN_SLIDING = 20
 """The fewest intervals of sliding that ``F_s`` is fitted on (fewer are left out)."""
-GRAVITY = 9.81
-"""m/s²: ``g``, for the truth's ``μ m g``."""
 
 
 @dataclass(frozen=True)
@@ -189,22 +189,17 @@ def fit(
 
 
 def truth_friction(truth) -> dict[str, float | None]:
-    """The floor's friction as the fit has it, ``friction_torque`` ``τ_c``, ``spin_drag`` ``κ``
-    and ``sliding_friction`` ``F_s = μ m g``, in a recorded
-    :class:`~agent.platform.protocol.Truth`: 0 on a frictionless floor (a truth without
-    Coulomb friction, ``ground_coulomb``); else as the truth derives ``τ_c`` and ``κ``
-    (``friction_torque``, ``spin_drag``), or ``τ_c = μ m g c`` from its friction radius ``c``
-    where it does not, None where it gives neither."""
-    coulomb = getattr(truth, "ground_coulomb", 0.0)
-    weight = coulomb * GRAVITY * truth.mass
-    if not coulomb:
-        torque, drag = 0.0, 0.0
-    elif hasattr(truth, "spin_drag"):
-        torque, drag = truth.friction_torque, truth.spin_drag
-    else:
-        radius = getattr(truth, "friction_radius", None)
-        torque, drag = (None if radius is None else weight * radius), None
-    return {"friction_torque": torque, "spin_drag": drag, "sliding_friction": weight}
+    """The floor's friction as the fit has it, from a recorded
+    :class:`~agent.platform.protocol.Truth`'s Coulomb friction ``μ`` (``ground_coulomb``), the
+    load's mass and the supports' friction radius ``c``: ``friction_torque`` ``τ_c = μ m g c``,
+    ``sliding_friction`` ``F_s = μ m g``, and ``spin_drag`` ``κ`` if the truth gives it (it
+    needs each support's load and arm: None otherwise); all 0 on a frictionless floor."""
+    weight = getattr(truth, "ground_coulomb", 0.0) * GRAVITY * truth.mass
+    return {
+        "friction_torque": weight * getattr(truth, "friction_radius", 0.0),
+        "spin_drag": getattr(truth, "spin_drag", None) if weight else 0.0,
+        "sliding_friction": weight,
+    }
 
 
 def regimes(

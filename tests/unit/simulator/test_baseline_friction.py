@@ -188,18 +188,13 @@ def test_a_load_that_never_turns_is_refused() -> None:
 
 def test_the_truths_friction_is_what_the_fit_is_compared_with() -> None:
     none = {"friction_torque": 0.0, "spin_drag": 0.0, "sliding_friction": 0.0}
-    assert truth_friction(SimpleNamespace(mass=5.0)) == none  # no floor: frictionless
+    assert truth_friction(SimpleNamespace(mass=5.0)) == none  # before the floor: frictionless
     assert truth_friction(SimpleNamespace(mass=5.0, ground_coulomb=0.0)) == none
     weight = 0.02 * GRAVITY * 5.0
-    floor = SimpleNamespace(mass=5.0, ground_coulomb=0.02, friction_torque=1.2, spin_drag=0.4)
-    assert truth_friction(floor) == {
-        "friction_torque": 1.2,
-        "spin_drag": 0.4,
-        "sliding_friction": pytest.approx(weight),
-    }
-    radius_only = SimpleNamespace(mass=5.0, ground_coulomb=0.02, friction_radius=1.2)
-    assert truth_friction(radius_only) == {
+    floor = SimpleNamespace(mass=5.0, ground_coulomb=0.02, friction_radius=1.2, friction_torque=-3)
+    assert truth_friction(floor) == {  # (its friction_torque: the floor's at that tick)
         "friction_torque": pytest.approx(weight * 1.2),
         "spin_drag": None,
         "sliding_friction": pytest.approx(weight),
     }
+    assert truth_friction(SimpleNamespace(**vars(floor), spin_drag=0.4))["spin_drag"] == 0.4
