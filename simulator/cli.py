@@ -4,7 +4,7 @@
     heft scenario generate SEED [-o FILE]
     heft sim SCENARIO [--team NAME] [--clock lockstep|realtime] [Zenoh options]
     heft demo [--out FILE] [--plot DIR] [--quiet]
-    heft baseline RECORDING [--velocity-noise S] [--force-noise S] [--out FILE]
+    heft baseline RECORDING [--velocity-noise S] [--force-noise S] [--no-friction] [--out FILE]
 
 (Its benchmarks, ``heft bench accuracy|generated|zenoh|noise|sweep|changes``, are in
 :mod:`simulator.bench.cli`.)
@@ -765,12 +765,15 @@ def _add_baseline(commands: argparse._SubParsersAction) -> None:
         help="the centralized reference: a batch fit of a recording",
         formatter_class=HelpFormatter,
         description=(
-            "Fit the load's mass, moment of inertia and every contact's offset to the COM to\n"
-            "all robots' recorded measurements at once (simulator/baseline.py: a batch least-\n"
-            "squares fit of the rigid-body model over the longest stretch of ticks at which\n"
-            "every robot was measured), with standard deviations; print them against the\n"
-            "recorded truth, when there is one. The yardstick of the distributed estimators:\n"
-            "what one computer that saw everything could reach.\n\n"
+            "Fit the load's mass, moment of inertia, every contact's offset to the COM and the\n"
+            "floor's friction (while the load turns, a torque tau_c against the turn and a drag\n"
+            "kappa v/|omega| on the COM; while it slides without turning, F_s = mu m g against\n"
+            "its motion) to all robots' recorded measurements at once (simulator/baseline.py:\n"
+            "a batch least-squares fit of the rigid-body model over the longest stretch of\n"
+            "ticks at which every robot was measured; the intervals where the load barely moves\n"
+            "are left out), with standard deviations; print them against the recorded truth,\n"
+            "when there is one. The yardstick of the distributed estimators: what one computer\n"
+            "that saw everything could reach.\n\n"
             "Exit status: 0 fitted, 1 the fit did not converge, 2 bad recording or arguments."
         ),
         epilog=(
@@ -796,12 +799,17 @@ def _add_baseline(commands: argparse._SubParsersAction) -> None:
         required=True,
         help="σ of the force sensing (N per axis): the forces' weight (0 if noise-free)",
     )
+    parser.add_argument(
+        "--no-friction",
+        action="store_true",
+        help="fit the rigid-body model alone, on every interval (a frictionless floor)",
+    )
     parser.add_argument("--out", metavar="FILE", help="write the fit as JSON (SI units) to FILE")
     parser.set_defaults(handler=cmd_baseline)
 
 
 def cmd_baseline(args: argparse.Namespace) -> int:
-    from simulator.baseline import fit, read_recording
+    from simulator.baseline import fit, read_recording, truth_friction
 
     for name in ("velocity_noise", "force_noise"):
         value = getattr(args, name)
@@ -829,22 +837,45 @@ def cmd_baseline(args: argparse.Namespace) -> int:
             args.velocity_noise,
             args.force_noise,
             run.first_tick,
+            friction=not args.no_friction,
         )
     except ValueError as err:
         raise UsageError(f"{args.recording}: {err}") from None
     truth = run.truth
+    friction = {} if truth is None else truth_friction(truth)
+    model = (
+        "without friction (--no-friction)"
+        if result.friction_torque is None
+        else f"friction: turning in {result.turning_intervals}, sliding in"
+        f" {result.sliding_intervals} of {result.ticks - 1} intervals (ε = "
+        f"{result.omega_epsilon:.2g} rad/s)"
+    )
     lines = [
         f"baseline of {args.recording}: {result.ticks} ticks, the load turned"
         f" {result.angle:.2f} rad; weights σ_v {result.velocity_noise:.2g} m/s, σ_f"
-        f" {result.force_noise:.2g} N" + ("" if result.converged else "; NOT CONVERGED"),
+        f" {result.force_noise:.2g} N; {model}" + ("" if result.converged else "; NOT CONVERGED"),
         "",
         f"{'':10} {'estimate':>10} {'± (1σ)':>10} {'truth':>10} {'error':>10}",
     ]
-    for label, value, std, true in (
+    rows = [
         ("m [kg]", result.mass, result.mass_std, None if truth is None else truth.mass),
         ("J [kg m2]", result.moment, result.moment_std, None if truth is None else truth.moment),
+    ]
+    for label, key in (
+        ("τ_c [N m]", "friction_torque"),
+        ("κ [N/m]", "spin_drag"),
+        ("F_s [N]", "sliding_friction"),
     ):
-        error = "-" if true is None else f"{100 * abs(value - true) / true:.3f} %"
+        value = getattr(result, key)
+        if value is not None:
+            rows.append((label, value, getattr(result, key + "_std"), friction.get(key)))
+    for label, value, std, true in rows:
+        if true is None:
+            error = "-"
+        elif true:
+            error = f"{100 * abs(value - true) / true:.3f} %"
+        else:  # no friction: how far from 0 in its own standard deviations
+            error = f"{abs(value) / std:.2f} σ" if std else "-"
         true_text = "-" if true is None else f"{true:.5f}"
         lines.append(f"{label:10} {value:10.5f} {std:10.2g} {true_text:>10} {error:>10}")
     lines += ["", f"{'robot':>5} {'ctc x [m]':>10} {'ctc y [m]':>10} {'± mm':>8} {'err mm':>8}"]
@@ -857,12 +888,18 @@ def cmd_baseline(args: argparse.Namespace) -> int:
             error = f"{errors[i]:.2f}"
         lines.append(f"{i:5} {c[0]:10.4f} {c[1]:10.4f} {1000 * std:8.2f} {error:>8}")
     lines.append("(ctc = contact_to_com = p_C - p_Ci in the world frame at the last tick fitted)")
+    if result.friction_torque is not None:
+        lines.append(
+            "(τ_c: the floor's friction torque about the COM while the load turns; κ: its drag"
+            " on the COM then, -κ v/|ω|; F_s: its friction while the load slides, μ m g)"
+        )
     print("\n".join(lines))
     if args.out:
         true = None
         if truth is not None:
             true = {"tick": truth.tick, "mass": truth.mass, "moment": truth.moment}
             true["contact_to_com"] = [list(c) for c in truth.contact_to_com]
+            true.update(friction)
         data = {
             "recording": str(args.recording),
             "period_s": run.period_s,

@@ -13,7 +13,7 @@ A change is *noticed* when the team restarts (:mod:`agent.algorithm.coordination
 report gives how many were, within :data:`NOTICE_WITHIN_S` of the change, the delays, the errors
 after the re-estimation against the changed load's truth, the false alarms, and the runs that kept
 the floor. Beside the re-estimated load, the centralized reference (``heft baseline``'s batch
-fit, :func:`simulator.bench.noise.baseline_errors`) on the same run's measurements from the
+fit, :func:`simulator.bench.noise.baseline_fit`) on the same run's measurements from the
 change to its end, which are all the changed load's, and the ratio of the two (reported, not
 a goal). Its goals (:data:`GOALS`, measured by :func:`figures`): every change noticed within
 :data:`NOTICE_WITHIN_S`, no false alarm, every run done and on its floor.
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from agent.algorithm.tuning import Estimators
 from agent.platform.goals import Goal, Sense
 from agent.platform.protocol import Measurement
-from simulator.bench.noise import NoiseSettings, baseline_errors, noisy
+from simulator.bench.noise import NoiseSettings, baseline_errors, baseline_fit, noisy
 from simulator.inprocess import run_inprocess
 from simulator.results import errors, floor_check, load_changes
 from simulator.scenario import LoadChange, Scenario
@@ -103,7 +103,8 @@ def run_case(scenario: Scenario, settings: NoiseSettings, seed: int, case: str) 
     reference = {}
     if case != "none":
         since = round(CHANGE_AT_S / outcome.scenario.period_s)
-        reference = baseline_errors(outcome, measured, settings, since_tick=since)
+        found = baseline_fit(outcome, measured, settings, since_tick=since)
+        reference = baseline_errors(outcome, found)
     latency = found["changes"][0]["latency_s"] if found["changes"] else None
     return ChangeResult(
         seed=seed,

@@ -7,8 +7,9 @@ gain error), Step 1 spins the load up faster (:attr:`NoiseSettings.spin_speed`),
 twice in this process:
 
 - with ``[agent] estimator = "robust"``: its measurements, every robot's at every tick, are
-  kept, and ``heft baseline``'s batch fit (:func:`simulator.baseline.fit`) is made on them from
-  the first tick to the robust run's final instant, then compared with the truth then;
+  kept, and ``heft baseline``'s batch fit (:func:`simulator.baseline.fit`, the floor's
+  friction with it) is made on them from the first tick to the robust run's final instant,
+  then compared with the truth then (its friction parameters are kept beside);
 - with ``estimator = "paper"``.
 
 Errors are the worst over robots (``m`` and ``J`` relative, ``contact_to_com`` in metres) and
@@ -37,6 +38,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,6 +51,9 @@ from agent.platform.protocol import Estimates, Measurement, Phase
 from simulator.inprocess import RunOutcome, Sample, run_inprocess
 from simulator.results import errors, floor_check, intervals
 from simulator.scenario import Actuators, Scenario
+
+if TYPE_CHECKING:
+    from simulator.baseline import BaselineFit
 
 DONE_WITHIN_S = 20.0
 """s simulated: the goal for every run's end."""
@@ -91,6 +96,15 @@ for half of its 1 s flip, so that ω swings about the turn the load had; speedin
 compact light load (``J`` of 1.6 kg m² under 7 robots) turned at up to 2.75 rad/s, beyond its
 floor's 2 rad/s (``heft bench noise --generated 20`` gives the largest ``|ω|`` over its runs,
 and how many kept to their floor)."""
+FRICTION_KEYS = {
+    "friction_torque_Nm": "friction_torque",
+    "spin_drag_N_m": "spin_drag",
+    "sliding_friction_N": "sliding_friction",
+}
+"""The baseline's friction errors (:func:`baseline_errors`), ``|τ̂_c − τ_c|`` (N m),
+``|κ̂ − κ|`` (N/m) and ``|F̂_s − μ m g|`` (N) against the truth's
+(:func:`~simulator.baseline.truth_friction`; 0 on a frictionless floor), and the parameter
+each is of."""
 SWEEP = (0.0, 0.001, 0.003, 0.01, 0.03)
 """σ_v (m/s) of the sweep; σ_f = 50 σ_v."""
 
@@ -183,6 +197,9 @@ class SeedResult:
     intervals: dict[str, list[Interval]] = field(default_factory=dict)
     """The robust run's published estimates (:func:`published`): ``mass``, ``moment``,
     ``contact_to_com``, ``relative_positions`` (one per edge) and ``own_mass``."""
+    baseline_friction: dict[str, float | None] = field(default_factory=dict)
+    """The batch fit's friction parameters and their standard deviations
+    (:func:`baseline_friction`)."""
 
 
 def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Estimators):
@@ -218,30 +235,41 @@ def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Est
     )
 
 
-def baseline_errors(
+def baseline_fit(
     outcome: RunOutcome,
     measured: list[list[Measurement]],
     settings: NoiseSettings,
     since_tick: int = 0,
-) -> dict[str, float | None]:
-    """The batch fit on the run's measurements from ``since_tick`` (at most
-    :data:`~simulator.baseline.MAX_TICKS` of them) up to its final instant, against the truth
-    then, as the robots' estimates are (:func:`~agent.platform.evaluation.team_errors`; its
-    m, J, ``contact_to_com`` and ``z_ij``, ``None`` everywhere if the fit fails)."""
+) -> BaselineFit | None:
+    """The batch fit (with the floor's friction) on the run's measurements from
+    ``since_tick`` (at most :data:`~simulator.baseline.MAX_TICKS` of them) up to its final
+    instant; None if it fails."""
     from simulator.baseline import MAX_TICKS, fit
 
-    truth = outcome.final.truth
-    last = min(truth.tick, len(measured) - 1)
+    last = min(outcome.final.truth.tick, len(measured) - 1)
     first = max(since_tick, last + 1 - MAX_TICKS)
     ticks = measured[first : last + 1]
     v = np.array([[m.velocity for m in tick] for tick in ticks])
     f = np.array([[m.force for m in tick] for tick in ticks])
     try:
-        found = fit(
+        return fit(
             v, f, outcome.scenario.period_s, settings.velocity_noise, settings.force_noise, first
         )
     except ValueError:
-        return dict.fromkeys(ERROR_KEYS)
+        return None
+
+
+def baseline_errors(outcome: RunOutcome, found: BaselineFit | None) -> dict[str, float | None]:
+    """The batch fit ``found`` (:func:`baseline_fit`) against the truth at the run's final
+    instant, as the robots' estimates are (:func:`~agent.platform.evaluation.team_errors`;
+    its m, J, ``contact_to_com`` and ``z_ij``), and its friction's absolute errors
+    (:data:`FRICTION_KEYS`, ``None`` if fitted without or the truth lacks it); ``None``
+    everywhere if the fit failed."""
+    from simulator.baseline import truth_friction
+
+    if found is None:
+        return dict.fromkeys((*ERROR_KEYS, *FRICTION_KEYS))
+    truth = outcome.final.truth
     scenario = outcome.scenario
     graph = {i: scenario.neighbours(i) for i in range(1, scenario.n + 1)}
     fitted = {
@@ -256,7 +284,19 @@ def baseline_errors(
         )
         for i, neighbours in graph.items()
     }
-    return team_errors(fitted, truth, graph)
+    true = truth_friction(truth)
+    errors = team_errors(fitted, truth, graph)
+    for key, name in FRICTION_KEYS.items():
+        value, exact = getattr(found, name), true[name]
+        errors[key] = None if value is None or exact is None else abs(value - exact)
+    return errors
+
+
+def baseline_friction(found: BaselineFit | None) -> dict[str, float | None]:
+    """The batch fit's friction parameters and their standard deviations (``None``: the fit
+    failed)."""
+    keys = [key + end for key in FRICTION_KEYS.values() for end in ("", "_std")]
+    return {key: None if found is None else getattr(found, key) for key in keys}
 
 
 def published(sample: Sample, shares: dict[int, FitShares]) -> dict[str, list[Interval]]:
@@ -312,6 +352,7 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
         on_measure=measured.append,
         on_sample=keep,
     )
+    reference = baseline_fit(robust, measured, settings)
     paper = run_inprocess(noisy(scenario, settings, seed, Estimators.PAPER), record_every=1000)
     inside: dict[str, list[bool]] = {key: [] for _, key, _, _ in QUANTITIES}
     names = {  # the errors' keys, those of simulator.results.intervals
@@ -331,7 +372,8 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
         seed=seed,
         robust=errors(robust),
         paper=errors(paper),
-        baseline=baseline_errors(robust, measured, settings),
+        baseline=baseline_errors(robust, reference),
+        baseline_friction=baseline_friction(reference),
         robust_time_s=robust.sim_time_s,
         robust_done=robust.converged,
         paper_done=paper.converged,

@@ -1,6 +1,7 @@
 """The centralized reference (simulator/baseline.py, ``heft baseline``): fitted to a run of the
 plant recorded as a team's recording, it finds the load's mass, moment of inertia and contact
-offsets, exactly without noise and within its own uncertainty with it."""
+offsets, exactly without noise and within its own uncertainty with it, and no friction on the
+plant's frictionless floor (its friction on a floor that has some: test_baseline_friction)."""
 
 from __future__ import annotations
 
@@ -69,6 +70,11 @@ def test_without_noise_the_fit_is_the_load() -> None:
     assert result.relative_position(1, 2) == pytest.approx(
         np.subtract(truth.contacts[0], truth.contacts[1]), abs=1e-3
     )
+    # no friction, to the same O(T²): a caster floor's would be about 1 N m and 0.4 N/m
+    assert abs(result.friction_torque) < 2e-3 and abs(result.spin_drag) < 1e-3
+    # the sines drive the load across ω = 0: there it slides, against no friction either
+    assert 0.5 * result.ticks < result.turning_intervals < result.ticks - 1
+    assert result.sliding_intervals > 20 and abs(result.sliding_friction) < 1e-3
 
 
 def test_with_noise_the_truth_is_within_the_fits_own_uncertainty() -> None:
@@ -79,6 +85,9 @@ def test_with_noise_the_truth_is_within_the_fits_own_uncertainty() -> None:
     assert 0 < result.moment_std < 0.1 * truth.moment
     assert abs(result.mass - truth.mass) < 4 * result.mass_std
     assert abs(result.moment - truth.moment) < 4 * result.moment_std
+    assert abs(result.friction_torque) < 4 * result.friction_torque_std
+    assert abs(result.spin_drag) < 4 * result.spin_drag_std
+    assert abs(result.sliding_friction) < 4 * result.sliding_friction_std
     for fitted, std, true in zip(
         result.contact_to_com, result.contact_to_com_std, truth.contact_to_com, strict=True
     ):
@@ -106,9 +115,20 @@ def test_heft_baseline_reads_a_recording_and_prints_the_fit_against_the_truth(
     assert main(["baseline", str(path), *noise, "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "m [kg]" in printed and "J [kg m2]" in printed and "5.00000" in printed
+    assert "τ_c [N m]" in printed and "κ [N/m]" in printed
     data = json.loads(out.read_text())
     assert abs(data["mass"] - truth.mass) / truth.mass < 1e-4
     assert data["truth"]["contact_to_com"] == [list(c) for c in truth.contact_to_com]
+    assert abs(data["friction_torque"]) < 2e-3 and data["friction_torque_std"] > 0
+    assert data["truth"]["friction_torque"] == data["truth"]["spin_drag"] == 0.0
+    assert data["truth"]["sliding_friction"] == 0.0 and "F_s [N]" in printed
+    # the rigid-body model alone: every interval, no friction
+    assert main(["baseline", str(path), *noise, "--no-friction", "--out", str(out)]) == 0
+    assert "without friction" in capsys.readouterr().out
+    rigid = json.loads(out.read_text())
+    assert rigid["friction_torque"] is None and rigid["sliding_friction"] is None
+    assert rigid["turning_intervals"] == rigid["ticks"] - 1 and rigid["sliding_intervals"] == 0
+    assert abs(rigid["mass"] - truth.mass) / truth.mass < 1e-4
 
 
 def test_heft_baseline_refuses_bad_input_in_one_line(tmp_path, capsys) -> None:

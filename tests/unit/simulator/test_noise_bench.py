@@ -119,6 +119,12 @@ def test_one_seed_against_the_centralized_fit() -> None:
     assert result.robust_done and not result.paper_done
     assert result.robust["mass_rel"] < 0.03 and result.baseline["mass_rel"] < 0.02
     assert result.baseline["relative_positions_m"] < 0.005
+    # the plant's floor is frictionless: the baseline finds none, within its uncertainty
+    friction = result.baseline_friction
+    for key in ("friction_torque", "spin_drag", "sliding_friction"):
+        if friction[key] is not None:  # F_s: fitted if the load slid
+            assert abs(friction[key]) < 4 * friction[key + "_std"]
+    assert result.baseline["friction_torque_Nm"] == abs(friction["friction_torque"])
     # Every robot's published estimates are kept, and at the current factors the calibration
     # counts inside exactly what the benchmark does.
     found = result.intervals
