@@ -306,8 +306,9 @@ def test_a_robust_runs_page_shows_how_sure_each_robot_is(tmp_path: Path) -> None
                 assert band["count"] > 20
                 assert band["lower"] == pytest.approx(est.mass - half, abs=1e-8)
                 assert band["upper"] == pytest.approx(est.mass + half, abs=1e-8)
+            # (m̂ is published from Step 7's stage on, the last few seconds of the chart's time)
             painted = page.evaluate(BAND_PIXELS, "mass")
-            assert painted["bands"] == 4 and painted["changed"] > 0.02 * painted["of"], painted
+            assert painted["bands"] == 4 and painted["changed"] > 0.005 * painted["of"], painted
             # The table: "±" under each m̂, Ĵ, τ̂_c, μ̂, c and z; beside each error ✓ or ✗ as
             # heft run's intervals say (the truth of m, J, c and z inside each, as here).
             table = page.inner_text("#table")

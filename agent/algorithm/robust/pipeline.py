@@ -14,6 +14,7 @@ Settling is judged by each estimate's own uncertainty, and the uncertainties are
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
@@ -30,10 +31,17 @@ from agent.algorithm.robust.team_mass import inputs, mass_input, team_mass
 from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, FitShares, packed
 from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2, turned_covariance
+from agent.platform.protocol import Estimates
 
 if TYPE_CHECKING:
     from agent.algorithm.inbox import Inbox
     from agent.algorithm.interfaces import ProbeSchedule
+
+
+PUBLISHED_FROM = 0.25
+"""The relative standard deviation at most which ``m̂`` and ``Ĵ`` are published: a fit's
+first instants say nothing yet (Step 7's first mass is typically 11 ± 11 kg on the paper's
+5 kg load), and a display would draw them as if they did."""
 
 
 class RobustPipeline(EstimationPipeline):
@@ -304,6 +312,18 @@ class RobustPipeline(EstimationPipeline):
         return mass_std / mass, cov
 
     # ---------------------------------------------------------------- reporting
+    def estimates(self, robot: int, schedule) -> Estimates:
+        """The estimates (:meth:`EstimationPipeline.estimates`), but ``m̂`` and ``Ĵ`` only once
+        known to :data:`PUBLISHED_FROM` of themselves: not yet, rather than a number that
+        means nothing."""
+        found = super().estimates(robot, schedule)
+        hidden = {}
+        for key in ("mass", "moment"):
+            value, std = getattr(found, key), getattr(found, key + "_std")
+            if value is not None and not (std is not None and std <= PUBLISHED_FROM * abs(value)):
+                hidden[key] = hidden[key + "_std"] = None
+        return dataclasses.replace(found, **hidden) if hidden else found
+
     def fit_shares(self) -> FitShares:
         """The shares of ``Ĵ``'s and of this robot's own ``m̂``'s uncertainties that their fits
         give (:class:`~agent.algorithm.robust.uncertainty.FitShares`), now."""
