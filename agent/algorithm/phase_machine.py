@@ -163,7 +163,9 @@ class PhaseMachine:
         elif phase == Phase.PUSH:
             self.moment_used = own.moment
             friction = own.friction_torque
-            self.friction_used = max(friction[0], 0.0) if friction is not None else 0.0
+            # no more than Step 4's own torque: a load that turned under it met less friction
+            most = abs(self.inertia_torque)
+            self.friction_used = min(max(friction[0], 0.0), most) if friction is not None else 0.0
             magnitude = self._push_magnitude(self.moment_used)
             self.push = _unit(self.tuning.push_direction, min(magnitude, self.tuning.max_force))
         self._begin(phase)

@@ -122,14 +122,17 @@ class RobustPhases(PhaseMachine):
         return self._pushing(k, own, velocity, (push[0] + damp[0], push[1] + damp[1]), keep=False)
 
     def _spin_up(self, k: int, own: OwnEstimates) -> Vec2:
-        """The torque ``s_ω (τ̂_c + Ĵ (ω* − |ω̂|) / spin_up_s)`` as eq. (14)'s forces: the turn
-        brought up to ``pendulum_spin`` against the floor's friction."""
+        """The torque ``s_ω (τ̂_c + Ĵ (ω* − |ω̂|) / spin_up_s)`` as eq. (14)'s forces, within
+        Step 4's torque ``±k w`` (each way: the turn brought up to ``pendulum_spin`` against the
+        floor's friction, and never driven past it however far off ``τ̂_c`` or ``Ĵ``)."""
         w = self.n * own.mean_square_offset
         robust = self.tuning.robust
         if not w > 0.0 or self.moment_used is None:
             return (0.0, 0.0)
         short = robust.pendulum_spin - abs(own.omega or 0.0)
         torque = self.friction_used + self.moment_used * short / max(robust.spin_up_s, self.dt)
+        most = abs(self.inertia_torque)  # no more than Step 4's torque, either way
+        torque = min(max(torque, -most), most)
         return inertia_force(self.spin_sign * torque / w, self._turned_centroid(k, own))
 
     def _turned_centroid(self, k: int, own: OwnEstimates) -> Vec2:
