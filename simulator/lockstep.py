@@ -110,6 +110,10 @@ class PlantTicks:
         return now
 
 
+CANNOT_BREAK_AWAY = "cannot break the load away"
+"""The verdict of a team whose every robot found the load held by the floor."""
+
+
 @dataclass(frozen=True)
 class Verdict:
     """Why a run ended: ``reason`` is short and machine-readable (``""``: converged), ``detail``
@@ -157,6 +161,14 @@ class RunEnd:
         """The verdict if the run is over at ``tick``, the robots of ``team`` stepped (their
         phases); ``None`` while it goes on."""
         phase = min(robot.phase for robot in team)
+        if all(getattr(robot, "stuck", False) for robot in team):
+            torque = max(getattr(robot, "stuck_torque", 0.0) for robot in team)
+            return Verdict(
+                CANNOT_BREAK_AWAY,
+                f"Step 4's torque of {torque:.3g} N m left the load where it was at"
+                f" t = {tick * self.period_s:.2f} s simulated: the floor holds it (the torque"
+                " is inertia_force a robot, at most max_force)",
+            )
         if phase == Phase.HALTED:
             return halted((), f"the team halted at t = {tick * self.period_s:.2f} s simulated")
         if phase == Phase.DONE:

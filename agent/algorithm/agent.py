@@ -70,6 +70,17 @@ class Agent:
         return self.phase_machine.barrier.phase
 
     @property
+    def stuck(self) -> bool:
+        """Whether this robot found the load held by the floor (Step 4's torque did not turn
+        it)."""
+        return self.pipeline.stuck
+
+    @property
+    def stuck_torque(self) -> float:
+        """Step 4's torque ``|k w|`` (N m): what did not turn a stuck load."""
+        return abs(self.phase_machine.inertia_torque)
+
+    @property
     def phase_since(self) -> int:
         """The tick at which this robot entered its phase, in the run's ticks (as its
         :meth:`estimates` say)."""

@@ -31,6 +31,8 @@ class OwnEstimates(Protocol):
     """``ṗ_Ci``, the robot's own velocity, at the estimation instant."""
     com_velocity: Vec2 | None
     """``ṗ_C`` (Step 6)."""
+    stuck: bool
+    """Whether Step 4's torque left the load where it was (the floor holds it)."""
     changed: bool
     """Whether a probe found the load changed (robust family:
     :mod:`agent.algorithm.robust.load_change`)."""
@@ -70,6 +72,8 @@ class Schedule(Protocol):
     """The common force ``f`` of the push phase (eq. 17), before its sign."""
     moment_used: float | None
     """The ``Ĵ`` the push force was sized with."""
+    inertia_torque: float
+    """Step 4's torque ``sign(ω) k w`` while speeding up (N m)."""
 
     @property
     def phase(self) -> Phase:

@@ -229,7 +229,11 @@ class PhaseMachine:
         return own.settled(Phase.INERTIA) and k - self.since >= self.inertia_min_ticks
 
     def _inertia_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
-        """Eq. (14) with the torque's sign for tick ``k`` (records the team's torque)."""
+        """Eq. (14) with the torque's sign for tick ``k`` (records the team's torque); nothing
+        once the load is found stuck: the team cannot break it away."""
+        if own.stuck:
+            self._torque[k] = 0.0
+            return (0.0, 0.0)
         self.direction = self._inertia_direction(k, own)
         self._torque[k] = self.direction * self.inertia_torque
         # z_i turned to the middle of [t_k, t_k+1): the torque then averages ±k w.

@@ -102,6 +102,9 @@ class EstimationPipeline:
         self.com_velocity: Vec2 | None = None
         self.changed = False
         """Whether a probe found the load changed since the team's last (re)start (robust)."""
+        self.stuck = False
+        """Whether Step 4's torque left the load where it was (a family that watches for it:
+        the floor holds the load, and nothing more can be estimated)."""
         self.change_score: float | None = None
         """The last probe's test of the load against the estimates (standard deviations)."""
 
@@ -141,7 +144,7 @@ class EstimationPipeline:
         if phase == Phase.EXCITE:
             return s.distances.settled and s.centroid.settled and s.mean_square_offset.settled
         if phase == Phase.INERTIA:
-            return s.moment.settled
+            return s.moment.settled and not self.stuck
         if phase == Phase.PUSH:
             return (s.com_offset.settled or self.swung) and s.mass.settled
         return False
@@ -386,6 +389,7 @@ class EstimationPipeline:
             settled=self.settle.first_settled(),
             load_changes=schedule.load_changes,
             change_score=self.change_score,
+            stuck_torque=abs(schedule.inertia_torque) if self.stuck else None,
             **self._reported(relative, contact_to_com),
         )
 

@@ -156,7 +156,8 @@ class Estimates:
     ``friction_torque`` (N m) is the floor's friction torque about the COM while the load turns
     and ``coulomb`` its kinetic friction coefficient ``μ`` (the force ``−μ m g`` against the COM's
     motion while the load translates), each with its standard deviation (docs/estimator.md,
-    "Friction").
+    "Friction"). ``stuck_torque`` (N m), when given, is the torque the team applied in Step 4
+    without turning the load: the floor holds it, and the robot estimates nothing more.
 
     ``load_changes`` counts the team's restarts at Step 4 for a changed load and ``rejoins`` its
     new beginnings from Step 1 after a halt (:mod:`agent.algorithm.coordination`);
@@ -194,6 +195,7 @@ class Estimates:
     friction_torque_std: float | None = None
     coulomb: float | None = None
     coulomb_std: float | None = None
+    stuck_torque: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -558,6 +560,7 @@ _OPTIONAL_ESTIMATES: tuple[tuple[str, int], ...] = (
     ("friction_torque_std", 1),
     ("coulomb", 1),
     ("coulomb_std", 1),
+    ("stuck_torque", 1),
 )
 """The :class:`Estimates` fields that may be ``None``, and how many numbers each one is."""
 KINDS: dict[type, int] = {
@@ -846,6 +849,7 @@ def _estimates(m: Estimates) -> None:
         "change_score",
         "friction_torque_std",
         "coulomb_std",
+        "stuck_torque",
     ):
         value = getattr(m, name)
         if value is not None:

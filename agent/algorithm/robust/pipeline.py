@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +39,11 @@ if TYPE_CHECKING:
     from agent.algorithm.interfaces import ProbeSchedule
 
 
+STUCK_TURN = 0.02
+"""rad: a load that has turned less than this over :data:`STUCK_FLIPS` of Step 4's flips is
+held by the floor: the team's torque does not break it away, so nothing more can be
+estimated, and the robot stops pushing and says so."""
+STUCK_FLIPS = 2
 PUBLISHED_FROM = 0.25
 """The relative standard deviation at most which ``m̂`` and ``Ĵ`` are published: a fit's
 first instants say nothing yet (Step 7's first mass is typically 11 ± 11 kg on the paper's
@@ -197,7 +203,17 @@ class RobustPipeline(EstimationPipeline):
 
     def _update_inertia(self, torque: float, span: float) -> None:
         # the rotation angle, not ω; friction's torque against the turn
-        self.inertia.update(self.angle, torque, span, spin=self._spin)
+        fit = self.inertia
+        if not fit.started:
+            self._turns = deque()
+        fit.update(self.angle, torque, span, spin=self._spin)
+        # held by the floor: turned less than STUCK_TURN over the last STUCK_FLIPS flips
+        window, turns = STUCK_FLIPS * self.tuning.robust.inertia_flip_s, self._turns
+        turns.append((fit.t, self.angle))
+        while turns and turns[0][0] < fit.t - window:
+            turns.popleft()
+        if fit.t >= window and not self.stuck:
+            self.stuck = abs(self.angle - turns[0][1]) < STUCK_TURN
 
     @property
     def _spin(self) -> float:
