@@ -115,6 +115,7 @@ class Own:
     moment: float | None = None
     friction_torque: tuple[float, float] | None = None
     com_velocity: Vec2 | None = None
+    stuck: bool = False
     changed: bool = False
 
     def settled(self, phase: Phase) -> bool:

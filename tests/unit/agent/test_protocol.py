@@ -666,7 +666,7 @@ def test_estimates_with_no_such_phase_are_refused(phase: int) -> None:
     assert "phase" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_FULL, phase=phase)))
 
 
-@pytest.mark.parametrize("present", [1 << 19, 0xFFFFFFFF])
+@pytest.mark.parametrize("present", [1 << 20, 0xFFFFFFFF])
 def test_estimates_presence_bits_past_the_fields_are_refused(present: int) -> None:
     assert "presence" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_EMPTY, present=present)))
 

@@ -349,6 +349,7 @@ class _Own:
         self.centroid = (1.0, 0.5)
         self.mean_square_offset = 2.0
         self.moment = 12.0
+        self.stuck = False
 
 
 def test_robust_inertia_torque_follows_the_clock_not_each_robots_noisy_omega() -> None:
