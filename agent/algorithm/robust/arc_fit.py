@@ -104,6 +104,10 @@ class ArcRelativePosition:
         """The (forgotten) sum of the squared second differences of ``ż_ij``, and its count."""
         self._solution: Solution | None = None
         """The fit after the last sample used, once it determines the circle."""
+        self._distance: float | None = None
+        """``‖z_ij‖`` from :attr:`_solution`."""
+        self._distance_std: float | None = None
+        """Its standard deviation."""
 
     def update(self, zdot: Vec2, dt: float, *, follow: bool = True) -> None:
         """Feed ``ż_ij`` sampled ``dt`` after the last sample used."""
@@ -190,12 +194,19 @@ class ArcRelativePosition:
         x, y = s
         self.fit.add((2.0 * x, 2.0 * y, 1.0), x * x + y * y)
         solution = self.fit.solve() if self.fit.rows >= 10 else None
-        self._solution = None
-        if solution is not None:
-            self._solution = solution
-            r, std = self.distance, self.distance_std
-            if r is None or std is None or std > 0.5 * r:
-                self._solution = None
+        self._solution = self._distance = self._distance_std = None
+        if solution is None:
+            return
+        cx, cy, d = solution.estimate
+        r2 = d + cx * cx + cy * cy
+        if not r2 > 0.0:
+            return
+        r = math.sqrt(r2)
+        scale = CORRELATION * solution.rows
+        std = math.sqrt(solution.variance_of((cx / r, cy / r, 0.5 / r), scale))
+        if std > 0.5 * r:  # the circle not yet determined
+            return
+        self._solution, self._distance, self._distance_std = solution, r, std
 
     @property
     def _scale(self) -> float:
@@ -218,12 +229,7 @@ class ArcRelativePosition:
     @property
     def distance(self) -> float | None:
         """``‖z_ij‖ = √(d + ‖c‖²)``, the fitted radius."""
-        fit = self._solution
-        if fit is None:
-            return None
-        cx, cy, d = fit.estimate
-        r2 = d + cx * cx + cy * cy
-        return math.sqrt(r2) if r2 > 0.0 else None
+        return self._distance
 
     @property
     def covariance(self) -> Covariance | None:
@@ -265,10 +271,6 @@ class ArcRelativePosition:
 
     @property
     def distance_std(self) -> float | None:
-        """The standard deviation (m) of :attr:`distance`."""
-        r = self.distance
-        if r is None:
-            return None
-        fit = self._solution
-        cx, cy, _ = fit.estimate
-        return math.sqrt(fit.variance_of((cx / r, cy / r, 0.5 / r), self._scale))
+        """The standard deviation (m) of :attr:`distance`: the fit's, through
+        ``∂r/∂p = (c_x/r, c_y/r, 1/(2r))``, scaled by ``N`` and :data:`CORRELATION`."""
+        return self._distance_std

@@ -9,13 +9,18 @@ positive definite), the residual sum of squares is ``Σ b² − p̂ᵀ v``, and 
 covariance ``σ̂² M⁻¹`` with ``σ̂² = RSS / (N − p)`` — for independent residuals. The estimators
 say how they scale it when theirs are not.
 
-Plain floats, no numpy: ``p ≤ 4`` here, where small arrays cost more than they save.
+Plain floats, no numpy: ``p ≤ 7`` here, where small arrays cost more than they save; the
+normal equations are solved by code written out for ``p`` (:mod:`agent.algorithm.robust.
+normal_equations`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from operator import mul
+
+from agent.algorithm.robust.normal_equations import solver
 
 
 class LeastSquares:
@@ -31,17 +36,17 @@ class LeastSquares:
         self.rows = 0.0
         """The (forgotten) number of rows."""
         self._m = [0.0] * (params * params)
+        """``M``, row-major (its lower triangle kept: it is symmetric)."""
         self._v = [0.0] * params
         self._bb = 0.0
+        self._solve = solver(params)
 
     def add(self, row: Sequence[float], target: float) -> None:
         """One more row ``rowᵀ p ≈ target``."""
         p, m, v, lam = self.params, self._m, self._v, self.forgetting
         if lam != 1.0:
-            for i in range(p * p):
-                m[i] *= lam
-            for i in range(p):
-                v[i] *= lam
+            self._m = m = [lam * x for x in m]
+            self._v = v = [lam * x for x in v]
             self._bb *= lam
             self.rows *= lam
         for i in range(p):
@@ -50,23 +55,22 @@ class LeastSquares:
                 continue
             v[i] += ai * target
             base = i * p
-            for j in range(p):
+            for j in range(i + 1):  # M is symmetric: its lower triangle is all that is read
                 m[base + j] += ai * row[j]
         self._bb += target * target
         self.rows += 1.0
 
     def solve(self) -> Solution | None:
-        """``p̂``, ``M⁻¹`` and ``σ̂²``, or ``None`` while the rows do not determine ``p``."""
+        """``p̂``, ``M⁻¹`` and ``σ̂²``, or ``None`` while the rows do not determine ``p``
+        (fewer than ``p + 1`` rows, or ``M`` singular to working precision)."""
         p = self.params
         if self.rows <= p:
             return None
-        chol = _cholesky(self._m, p)
-        if chol is None:
+        solved = self._solve(self._m, self._v)
+        if solved is None:
             return None
-        inverse = _inverse_from_cholesky(chol, p)
-        v = self._v
-        estimate = tuple(sum(inverse[i * p + j] * v[j] for j in range(p)) for i in range(p))
-        rss = max(self._bb - sum(e * b for e, b in zip(estimate, v)), 0.0)
+        estimate, inverse, explained = solved
+        rss = max(self._bb - explained, 0.0)
         return Solution(estimate, inverse, rss / (self.rows - p), self.rows)
 
 
@@ -176,39 +180,5 @@ class Solution:
         for i in range(p):
             gi = gradient[i]
             if gi:
-                total += gi * sum(inv[i * p + j] * gradient[j] for j in range(p))
+                total += gi * sum(map(mul, inv[i * p : i * p + p], gradient))
         return max(scale * self.variance * total, 0.0)
-
-
-def _cholesky(m: list[float], p: int) -> list[float] | None:
-    """Lower-triangular ``L`` with ``L Lᵀ = m`` (row-major), or ``None`` unless ``m`` is
-    positive definite to working precision."""
-    scale = max(abs(m[i * p + i]) for i in range(p))
-    if scale == 0.0 or not math.isfinite(scale):
-        return None
-    low = [0.0] * (p * p)
-    for i in range(p):
-        for j in range(i + 1):
-            total = m[i * p + j] - sum(low[i * p + k] * low[j * p + k] for k in range(j))
-            if i == j:
-                if total <= 1e-13 * scale:
-                    return None
-                low[i * p + i] = math.sqrt(total)
-            else:
-                low[i * p + j] = total / low[j * p + j]
-    return low
-
-
-def _inverse_from_cholesky(low: list[float], p: int) -> tuple[float, ...]:
-    """``(L Lᵀ)⁻¹`` from ``L``: invert ``L``, then ``L⁻ᵀ L⁻¹``."""
-    inv_low = [0.0] * (p * p)
-    for i in range(p):
-        inv_low[i * p + i] = 1.0 / low[i * p + i]
-        for j in range(i):
-            total = sum(low[i * p + k] * inv_low[k * p + j] for k in range(j, i))
-            inv_low[i * p + j] = -total / low[i * p + i]
-    return tuple(
-        sum(inv_low[k * p + i] * inv_low[k * p + j] for k in range(max(i, j), p))
-        for i in range(p)
-        for j in range(p)
-    )

@@ -1,0 +1,105 @@
+"""The normal equations ``M p = v`` of a least-squares fit with ``p`` parameters, solved by
+Cholesky, as straight-line code made once for each ``p``.
+
+For ``M`` symmetric positive definite (row-major; only its lower triangle is read):
+
+1. ``L Lᵀ = M``: ``L_ij = (M_ij − Σ_{k<j} L_ik L_jk) / L_jj`` for ``j < i``, then
+   ``L_ii = √(M_ii − Σ_{k<i} L_ik²)``; ``M`` is taken for singular (no solution) unless every
+   such radicand exceeds ``10⁻¹³`` times ``M``'s largest diagonal entry;
+2. ``U = L⁻¹``: ``U_ii = 1 / L_ii``, ``U_ij = −(Σ_{k=j}^{i−1} L_ik U_kj) / L_ii``;
+3. ``M⁻¹ = Uᵀ U``: ``(M⁻¹)_ij = Σ_{k≥max(i,j)} U_ki U_kj``, each entry below the diagonal
+   computed once and mirrored;
+4. ``p̂ = M⁻¹ v`` and ``p̂ᵀ v``.
+
+An estimator solves its fit after every row (a few per tick and robot), for ``p`` of 3 to 7:
+there the loops, indexing and slices of these formulas cost several times their arithmetic. So
+:func:`solver` writes them out for ``p`` (every index a name, every sum over its terms) and
+compiles that once. It performs the same floating-point operations in the same order as the
+loops (each sum of several terms by ``sum``, from 0), so its results are the loops' bit for
+bit (``tests/unit/agent/test_robust_estimation.py`` holds them to it).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable, Sequence
+
+Solved = tuple[tuple[float, ...], tuple[float, ...], float]
+"""``(p̂, M⁻¹ row-major, p̂ᵀ v)``."""
+Solver = Callable[[Sequence[float], Sequence[float]], "Solved | None"]
+"""``solve(M, v)``: :data:`Solved`, or ``None`` if ``M`` is not positive definite."""
+
+SINGULAR = 1e-13
+"""A radicand of the Cholesky factor at most this times ``M``'s largest diagonal entry: ``M``
+is singular to working precision."""
+
+
+@functools.cache
+def solver(p: int) -> Solver:
+    """The solver of ``p`` normal equations (see the module docstring)."""
+    if p < 1:
+        raise ValueError("p must be at least 1")
+    namespace = {"sqrt": math.sqrt, "isfinite": math.isfinite, "SINGULAR": SINGULAR}
+    exec(compile(_source(p), f"<normal equations, p = {p}>", "exec"), namespace)
+    return namespace["solve"]
+
+
+def _source(p: int) -> str:
+    """The Python source of ``solve(m, v)`` for ``p`` parameters."""
+
+    def low(i: int, j: int) -> str:
+        return f"l{i}_{j}"
+
+    def inv_low(i: int, j: int) -> str:
+        return f"u{i}_{j}"
+
+    def inverse(i: int, j: int) -> str:
+        return f"w{max(i, j)}_{min(i, j)}"
+
+    lines = ["def solve(m, v):"]
+    emit = lines.append
+    for i in range(p):
+        for j in range(i + 1):
+            emit(f"    m{i}_{j} = m[{i * p + j}]")
+        emit(f"    v{i} = v[{i}]")
+    emit(f"    scale = max(({''.join(f'abs(m{i}_{i}), ' for i in range(p))}))")
+    emit("    if scale == 0.0 or not isfinite(scale):")
+    emit("        return None")
+    for i in range(p):  # L
+        for j in range(i):
+            products = _sum([(low(i, k), low(j, k)) for k in range(j)])
+            numerator = f"m{i}_{j}" if products is None else f"(m{i}_{j} - {products})"
+            emit(f"    {low(i, j)} = {numerator} / {low(j, j)}")
+        products = _sum([(low(i, k), low(i, k)) for k in range(i)])
+        emit(f"    t = m{i}_{i}" + ("" if products is None else f" - {products}"))
+        emit("    if t <= SINGULAR * scale:")
+        emit("        return None")
+        emit(f"    {low(i, i)} = sqrt(t)")
+    for i in range(p):  # U = L⁻¹
+        emit(f"    {inv_low(i, i)} = 1.0 / {low(i, i)}")
+        for j in range(i):
+            total = _sum([(low(i, k), inv_low(k, j)) for k in range(j, i)])
+            emit(f"    {inv_low(i, j)} = -{total} / {low(i, i)}")
+    for i in range(p):  # M⁻¹ = Uᵀ U
+        for j in range(i + 1):
+            total = _sum([(inv_low(k, i), inv_low(k, j)) for k in range(i, p)])
+            emit(f"    {inverse(i, j)} = {total}")
+    for i in range(p):  # p̂ = M⁻¹ v
+        emit(f"    e{i} = {_sum([(inverse(i, j), f'v{j}') for j in range(p)])}")
+    estimate = "".join(f"e{i}, " for i in range(p))
+    matrix = "".join(f"{inverse(i, j)}, " for i in range(p) for j in range(p))
+    explained = _sum([(f"e{i}", f"v{i}") for i in range(p)])
+    emit(f"    return ({estimate}), ({matrix}), {explained}")
+    return "\n".join(lines) + "\n"
+
+
+def _sum(products: list[tuple[str, str]]) -> str | None:
+    """The source of ``Σ a·b`` over ``products``, as ``sum`` adds them (from the integer 0:
+    one term ``x`` is ``0.0 + x``); ``None`` for no terms."""
+    terms = [f"{a} * {b}" for a, b in products]
+    if not terms:
+        return None
+    if len(terms) == 1:
+        return f"(0.0 + {terms[0]})"
+    return f"sum(({', '.join(terms)}))"
