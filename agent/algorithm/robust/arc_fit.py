@@ -123,21 +123,19 @@ class ArcRelativePosition:
         h = 0.5 * dt
         sx = self.s[0] + h * (self.zdot[0] + zdot[0])
         sy = self.s[1] + h * (self.zdot[1] + zdot[1])
-        turn = angle_between(self.zdot, zdot)
         self._measure_noise(zdot)
         self.s = (sx, sy)
         self._before, self.zdot = self.zdot, zdot
         self.last_dt = dt
         self._add(self.s)
-        c = self.centre
-        if c is not None:  # both ends about the same centre: its own refits are no turn
-            self.last_turn = angle_between(
-                (before[0] - c[0], before[1] - c[1]), (sx - c[0], sy - c[1])
-            )
+        fit = self._solution
+        if fit is not None:  # both ends about the same centre: its own refits are no turn
+            cx, cy = fit.estimate[0], fit.estimate[1]
+            self.last_turn = angle_between((before[0] - cx, before[1] - cy), (sx - cx, sy - cy))
             if follow:
                 self.follow(self.last_turn)
         else:
-            self.last_turn = turn  # ż_ij turns with z_ij
+            self.last_turn = angle_between(self._before, zdot)  # ż_ij turns with z_ij
             self.direction = None
 
     def _measure_noise(self, zdot: Vec2) -> None:
@@ -162,14 +160,14 @@ class ArcRelativePosition:
         that of the arc's own increment, :attr:`last_turn`), then the sample measures it.
         :meth:`update` calls it with the arc's own increment unless told not to
         (``follow=False``: the caller then follows the team's turn)."""
-        if self.centre is None or not self.moving:
+        fit = self._solution
+        if fit is None or not self.moving:
             return
         zdot, dt = self.zdot, self.last_dt
-        r = self.distance
-        c = self.centre
-        arc = (self.s[0] - c[0], self.s[1] - c[1])
+        r = self._distance
         if self.direction is None:  # start from the arc, with its uncertainty
-            self.direction = math.atan2(arc[1], arc[0])
+            c = fit.estimate
+            self.direction = math.atan2(self.s[1] - c[1], self.s[0] - c[0])
             self.direction_var = (self._arc_std / r) ** 2
             return
         noise = self.noise

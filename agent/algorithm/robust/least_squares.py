@@ -18,9 +18,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from operator import mul
 
-from agent.algorithm.robust.normal_equations import solver
+from agent.algorithm.robust.normal_equations import accumulator, quadratic_form, solver
 
 
 class LeastSquares:
@@ -39,24 +38,18 @@ class LeastSquares:
         """``M``, row-major (its lower triangle kept: it is symmetric)."""
         self._v = [0.0] * params
         self._bb = 0.0
+        self._add = accumulator(params)
         self._solve = solver(params)
 
     def add(self, row: Sequence[float], target: float) -> None:
-        """One more row ``rowᵀ p ≈ target``."""
-        p, m, v, lam = self.params, self._m, self._v, self.forgetting
+        """One more row ``rowᵀ p ≈ target`` (``row``: ``p`` numbers)."""
+        m, v, lam = self._m, self._v, self.forgetting
         if lam != 1.0:
             self._m = m = [lam * x for x in m]
             self._v = v = [lam * x for x in v]
             self._bb *= lam
             self.rows *= lam
-        for i in range(p):
-            ai = row[i]
-            if ai == 0.0:
-                continue
-            v[i] += ai * target
-            base = i * p
-            for j in range(i + 1):  # M is symmetric: its lower triangle is all that is read
-                m[base + j] += ai * row[j]
+        self._add(m, v, row, target)
         self._bb += target * target
         self.rows += 1.0
 
@@ -120,11 +113,15 @@ class ReciprocalFit(RunFit):
     positive, and :attr:`std` its standard deviation."""
 
     index = 2
+    _std: float | None = None
+    """:attr:`std`, from the last solve."""
 
     def _solve(self) -> None:
         super()._solve()
-        if self._solution is not None and self._solution.estimate[self.index] <= 0.0:
-            self._solution = None
+        fit = self._solution
+        if fit is not None and fit.estimate[self.index] <= 0.0:
+            self._solution = fit = None
+        self._std = None if fit is None else fit.reciprocal(self.index, self._scale)[1]
 
     @property
     def estimate(self) -> float | None:
@@ -134,9 +131,8 @@ class ReciprocalFit(RunFit):
 
     @property
     def std(self) -> float | None:
-        """The standard deviation of :attr:`estimate`."""
-        fit = self._solution
-        return None if fit is None else fit.reciprocal(self.index, self._scale)[1]
+        """The standard deviation of :attr:`estimate` (kept from the last solve)."""
+        return self._std
 
     @property
     def covariance(self) -> tuple[tuple[float]] | None:
@@ -174,11 +170,5 @@ class Solution:
 
     def variance_of(self, gradient: Sequence[float], scale: float = 1.0) -> float:
         """``scale · σ̂² gᵀ M⁻¹ g``: the variance of a function of ``p̂`` with gradient ``g``."""
-        p = len(self.estimate)
-        inv = self.inverse
-        total = 0.0
-        for i in range(p):
-            gi = gradient[i]
-            if gi:
-                total += gi * sum(map(mul, inv[i * p : i * p + p], gradient))
+        total = quadratic_form(len(self.estimate))(self.inverse, gradient)
         return max(scale * self.variance * total, 0.0)

@@ -1,7 +1,9 @@
-"""The normal equations ``M p = v`` of a least-squares fit with ``p`` parameters, solved by
-Cholesky, as straight-line code made once for each ``p``.
+"""The normal equations ``M p = v`` of a least-squares fit with ``p`` parameters, accumulated
+row by row and solved by Cholesky, as straight-line code made once for each ``p``.
 
-For ``M`` symmetric positive definite (row-major; only its lower triangle is read):
+A row ``a`` with target ``b`` adds ``a aᵀ`` to ``M`` (row-major; its lower triangle only, as
+``M`` is symmetric) and ``a b`` to ``v``, skipping the entries of each ``a_i = 0``. For ``M``
+symmetric positive definite:
 
 1. ``L Lᵀ = M``: ``L_ij = (M_ij − Σ_{k<j} L_ik L_jk) / L_jj`` for ``j < i``, then
    ``L_ii = √(M_ii − Σ_{k<i} L_ik²)``; ``M`` is taken for singular (no solution) unless every
@@ -9,14 +11,18 @@ For ``M`` symmetric positive definite (row-major; only its lower triangle is rea
 2. ``U = L⁻¹``: ``U_ii = 1 / L_ii``, ``U_ij = −(Σ_{k=j}^{i−1} L_ik U_kj) / L_ii``;
 3. ``M⁻¹ = Uᵀ U``: ``(M⁻¹)_ij = Σ_{k≥max(i,j)} U_ki U_kj``, each entry below the diagonal
    computed once and mirrored;
-4. ``p̂ = M⁻¹ v`` and ``p̂ᵀ v``.
+4. ``p̂ = M⁻¹ v`` and ``p̂ᵀ v``;
 
-An estimator solves its fit after every row (a few per tick and robot), for ``p`` of 3 to 7:
-there the loops, indexing and slices of these formulas cost several times their arithmetic. So
-:func:`solver` writes them out for ``p`` (every index a name, every sum over its terms) and
-compiles that once. It performs the same floating-point operations in the same order as the
-loops (each sum of several terms by ``sum``, from 0), so its results are the loops' bit for
-bit (``tests/unit/agent/test_robust_estimation.py`` holds them to it).
+and the quadratic form ``gᵀ M⁻¹ g`` of a gradient ``g`` (the variance of a function of ``p̂``),
+``Σ_i g_i Σ_j (M⁻¹)_ij g_j`` over the ``g_i ≠ 0``.
+
+An estimator adds a row to its fit and solves it a few times per tick and robot, for ``p`` of
+3 to 7: there the loops, indexing and slices of these formulas cost several times their
+arithmetic. So :func:`accumulator`, :func:`solver` and :func:`quadratic_form` write them out
+for ``p`` (every index a number or a name, every sum over its terms) and compile that once.
+The code performs the same floating-point operations in the same order as the loops (each sum
+of several terms by ``sum``, from 0), so its results are the loops' bit for bit
+(``tests/unit/agent/test_robust_estimation.py`` holds it to them).
 """
 
 from __future__ import annotations
@@ -25,10 +31,16 @@ import functools
 import math
 from collections.abc import Callable, Sequence
 
+Accumulator = Callable[[list[float], list[float], Sequence[float], float], None]
+"""``add(M, v, a, b)``: the row ``a`` (``p`` numbers) with target ``b`` added to ``M`` and
+``v``, in place."""
 Solved = tuple[tuple[float, ...], tuple[float, ...], float]
 """``(p̂, M⁻¹ row-major, p̂ᵀ v)``."""
 Solver = Callable[[Sequence[float], Sequence[float]], "Solved | None"]
 """``solve(M, v)``: :data:`Solved`, or ``None`` if ``M`` is not positive definite."""
+
+QuadraticForm = Callable[[Sequence[float], Sequence[float]], float]
+"""``form(W, g)``: ``gᵀ W g`` for ``W`` symmetric (row-major) and ``g`` of ``p`` numbers."""
 
 SINGULAR = 1e-13
 """A radicand of the Cholesky factor at most this times ``M``'s largest diagonal entry: ``M``
@@ -36,16 +48,58 @@ is singular to working precision."""
 
 
 @functools.cache
+def accumulator(p: int) -> Accumulator:
+    """The accumulator of rows of ``p`` numbers (see the module docstring)."""
+    return _compiled(_add_source(p), "add", p)
+
+
+@functools.cache
 def solver(p: int) -> Solver:
     """The solver of ``p`` normal equations (see the module docstring)."""
+    return _compiled(_solve_source(p), "solve", p)
+
+
+@functools.cache
+def quadratic_form(p: int) -> QuadraticForm:
+    """The quadratic form of ``p`` numbers (see the module docstring)."""
+    return _compiled(_form_source(p), "form", p)
+
+
+def _compiled(source: str, name: str, p: int) -> Callable:
     if p < 1:
         raise ValueError("p must be at least 1")
     namespace = {"sqrt": math.sqrt, "isfinite": math.isfinite, "SINGULAR": SINGULAR}
-    exec(compile(_source(p), f"<normal equations, p = {p}>", "exec"), namespace)
-    return namespace["solve"]
+    exec(compile(source, f"<normal equations: {name}, p = {p}>", "exec"), namespace)
+    return namespace[name]
 
 
-def _source(p: int) -> str:
+def _add_source(p: int) -> str:
+    """The Python source of ``add(m, v, row, target)`` for ``p`` parameters."""
+    lines = ["def add(m, v, row, target):"]
+    emit = lines.append
+    emit(f"    {''.join(f'a{i}, ' for i in range(p))}= row")
+    for i in range(p):
+        emit(f"    if a{i} != 0.0:")
+        emit(f"        v[{i}] += a{i} * target")
+        for j in range(i + 1):
+            emit(f"        m[{i * p + j}] += a{i} * a{j}")
+    return "\n".join(lines) + "\n"
+
+
+def _form_source(p: int) -> str:
+    """The Python source of ``form(w, g)`` for ``p`` parameters."""
+    lines = ["def form(w, g):"]
+    emit = lines.append
+    emit(f"    {''.join(f'g{i}, ' for i in range(p))}= g")
+    emit("    total = 0.0")
+    for i in range(p):
+        emit(f"    if g{i}:")
+        emit(f"        total += g{i} * {_sum([(f'w[{i * p + j}]', f'g{j}') for j in range(p)])}")
+    emit("    return total")
+    return "\n".join(lines) + "\n"
+
+
+def _solve_source(p: int) -> str:
     """The Python source of ``solve(m, v)`` for ``p`` parameters."""
 
     def low(i: int, j: int) -> str:

@@ -159,32 +159,34 @@ class RobustPipeline(EstimationPipeline):
         ω times the interval), plus the consensus on the neighbours' levels; each such edge's
         direction filter then follows it."""
         fallback = (self.omega or 0.0) * interval
-        fresh = [
-            j
-            for j in zdots
-            if self.edges[j].moving and abs(self.edges[j].last_dt - interval) < 1e-9
-        ]
+        edges = self.edges
+        fresh = []
         turns = []
-        for j in fresh:
-            edge, z = self.edges[j], zdots[j]
-            radius = edge.distance if edge.centre is not None else None
-            weight = turn_weight(
-                radius=radius, speed2=z[0] * z[0] + z[1] * z[1], noise=edge.noise, dt=interval
-            )
-            turns.append((edge.last_turn, weight))
+        for j, z in zdots.items():
+            edge = edges[j]
+            if edge.moving and abs(edge.last_dt - interval) < 1e-9:
+                fresh.append(edge)
+                weight = turn_weight(  # the radius is known once the circle is
+                    radius=edge.distance,
+                    speed2=z[0] * z[0] + z[1] * z[1],
+                    noise=edge.noise,
+                    dt=interval,
+                )
+                turns.append((edge.last_turn, weight))
         own = own_turn(turns)
         heard = (
             (j, s.degree, s.instant, s.consensus.rotation, s.consensus.mean_turn_variance)
             for j, s in inbox.latest.items()
-            if j in self.edges
+            if j in edges
         )
         turn, variance = (fallback, None) if own is None else own
         rotation = self.rotation
         turn = rotation.update(self.instant, turn, variance, heard, self._angle_at.get)
+        variance = rotation.turn_variance
         for j in zdots:
-            edge = self.edges[j]
-            if j in fresh:
-                edge.follow(turn, rotation.turn_variance)
+            edge = edges[j]
+            if edge in fresh:
+                edge.follow(turn, variance)
             else:
                 edge.follow(edge.last_turn)
         return turn

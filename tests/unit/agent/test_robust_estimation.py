@@ -19,7 +19,7 @@ from agent.algorithm.robust.drive_gain import DriveGain
 from agent.algorithm.robust.inertia_fit import InertiaFit
 from agent.algorithm.robust.least_squares import LeastSquares
 from agent.algorithm.robust.mass_fit import MassFit
-from agent.algorithm.robust.normal_equations import solver
+from agent.algorithm.robust.normal_equations import accumulator, quadratic_form, solver
 from agent.algorithm.robust.phases import RobustPhases
 from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
@@ -99,17 +99,36 @@ def _solved_by_loops(m: list[float], v: list[float], p: int):
 
 
 @pytest.mark.parametrize("p", range(1, 8))
-def test_normal_equations_solver_is_the_loops_bit_for_bit(p: int) -> None:
+def test_normal_equations_are_the_loops_bit_for_bit(p: int) -> None:
     rng = np.random.default_rng(p)
     for trial in range(20):
         rows = rng.normal(size=(3 * p, p)) * rng.uniform(1e-3, 1e3, size=p)
         if trial % 5 == 0:
             rows[:, -1] = 0.0  # a parameter the rows never reach: singular
-        m = [float(x) for x in (rows.T @ rows).ravel()]
-        v = [float(x) for x in rows.T @ rng.normal(size=3 * p)]
-        expected = _solved_by_loops(m, v, p)
+        m, v = [0.0] * (p * p), [0.0] * p
+        m_loops, v_loops = [0.0] * (p * p), [0.0] * p
+        add = accumulator(p)
+        for row, target in zip(rows.tolist(), rng.normal(size=3 * p).tolist()):
+            add(m, v, row, target)
+            for i in range(p):  # the loops it writes out (here over all of M)
+                v_loops[i] += row[i] * target
+                for j in range(p):
+                    m_loops[i * p + j] += row[i] * row[j]
+        assert v == v_loops
+        assert [m[i * p + j] for i in range(p) for j in range(i + 1)] == [
+            m_loops[i * p + j] for i in range(p) for j in range(i + 1)
+        ]
+        expected = _solved_by_loops(m_loops, v, p)
         assert solver(p)(m, v) == expected
         assert (expected is None) == (trial % 5 == 0)
+        if expected is not None:
+            inverse = expected[1]
+            g = (rng.normal(size=p) * (rng.uniform(size=p) < 0.7)).tolist()  # some g_i = 0
+            form = 0.0
+            for i in range(p):
+                if g[i]:
+                    form += g[i] * sum(inverse[i * p + j] * g[j] for j in range(p))
+            assert quadratic_form(p)(inverse, g) == form
 
 
 # ------------------------------------------------------------------------------ Step 1
