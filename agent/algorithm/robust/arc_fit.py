@@ -102,6 +102,9 @@ class ArcRelativePosition:
         """``ż_ij`` at the sample before the last one used."""
         self._second = [0.0, 0.0]
         """The (forgotten) sum of the squared second differences of ``ż_ij``, and its count."""
+        self.noise = 0.0
+        """``σ_e²``: the relative velocity's noise variance per axis (m²/s²), measured (0 until
+        a second difference is)."""
         self._solution: Solution | None = None
         """The fit after the last sample used, once it determines the circle."""
         self._distance: float | None = None
@@ -123,7 +126,13 @@ class ArcRelativePosition:
         h = 0.5 * dt
         sx = self.s[0] + h * (self.zdot[0] + zdot[0])
         sy = self.s[1] + h * (self.zdot[1] + zdot[1])
-        self._measure_noise(zdot)
+        if self._before is not None:  # the noise, from the second difference of ż_ij
+            ex = zdot[0] - 2.0 * self.zdot[0] + self._before[0]
+            ey = zdot[1] - 2.0 * self.zdot[1] + self._before[1]
+            lam, second = self.fit.forgetting, self._second
+            second[0] = lam * second[0] + ex * ex + ey * ey
+            second[1] = lam * second[1] + 1.0
+            self.noise = second[0] / (12.0 * second[1])
         self.s = (sx, sy)
         self._before, self.zdot = self.zdot, zdot
         self.last_dt = dt
@@ -137,22 +146,6 @@ class ArcRelativePosition:
         else:
             self.last_turn = angle_between(self._before, zdot)  # ż_ij turns with z_ij
             self.direction = None
-
-    def _measure_noise(self, zdot: Vec2) -> None:
-        before = self._before
-        if before is None:
-            return
-        ex = zdot[0] - 2.0 * self.zdot[0] + before[0]
-        ey = zdot[1] - 2.0 * self.zdot[1] + before[1]
-        lam, second = self.fit.forgetting, self._second
-        second[0] = lam * second[0] + ex * ex + ey * ey
-        second[1] = lam * second[1] + 1.0
-
-    @property
-    def noise(self) -> float:
-        """``σ_e²``: the relative velocity's noise variance per axis (m²/s²), measured."""
-        total, count = self._second
-        return total / (12.0 * count) if count else 0.0
 
     def follow(self, turn: float, variance: float | None = None) -> None:
         """One step of the direction filter (see the module docstring) at the last sample

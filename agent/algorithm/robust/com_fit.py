@@ -135,8 +135,8 @@ class ComFit(RunFit):
         fit = self._solution
         if fit is None:
             return None
-        cov = fit.covariance(self._scale)
-        return ((cov[2][2], cov[2][3]), (cov[3][2], cov[3][3]))
+        (xx, xy), (yx, yy) = fit.covariance(self._scale, of=(2, 3))
+        return ((xx, xy), (yx, yy))
 
     @property
     def std(self) -> float | None:

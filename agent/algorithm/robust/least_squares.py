@@ -153,11 +153,13 @@ class Solution:
         self.variance = variance
         self.rows = rows
 
-    def covariance(self, scale: float = 1.0) -> list[list[float]]:
-        """``scale · σ̂² M⁻¹``."""
+    def covariance(self, scale: float = 1.0, of: Sequence[int] | None = None) -> list[list[float]]:
+        """``scale · σ̂² M⁻¹``, or its rows and columns ``of`` (the covariance of those
+        parameters)."""
         p = len(self.estimate)
         k = scale * self.variance
-        return [[k * self.inverse[i * p + j] for j in range(p)] for i in range(p)]
+        indices = range(p) if of is None else of
+        return [[k * self.inverse[i * p + j] for j in indices] for i in indices]
 
     def reciprocal(self, index: int, scale: float = 1.0) -> tuple[float, float]:
         """``1/p̂_index`` and its standard deviation ``std(p̂_index) / p̂_index²`` (first

@@ -20,9 +20,10 @@ An estimator adds a row to its fit and solves it a few times per tick and robot,
 3 to 7: there the loops, indexing and slices of these formulas cost several times their
 arithmetic. So :func:`accumulator`, :func:`solver` and :func:`quadratic_form` write them out
 for ``p`` (every index a number or a name, every sum over its terms) and compile that once.
-The code performs the same floating-point operations in the same order as the loops (each sum
-of several terms by ``sum``, from 0), so its results are the loops' bit for bit
-(``tests/unit/agent/test_robust_estimation.py`` holds it to them).
+The code performs the same floating-point operations in the same order as the loops, each sum
+added term by term from 0.0, so its results are theirs bit for bit
+(``tests/unit/agent/test_robust_estimation.py`` holds it to them) and the same on every Python
+(``sum`` of floats adds them so up to 3.11, compensated from 3.12 on).
 """
 
 from __future__ import annotations
@@ -149,11 +150,9 @@ def _solve_source(p: int) -> str:
 
 
 def _sum(products: list[tuple[str, str]]) -> str | None:
-    """The source of ``Σ a·b`` over ``products``, as ``sum`` adds them (from the integer 0:
-    one term ``x`` is ``0.0 + x``); ``None`` for no terms."""
+    """The source of ``Σ a·b`` over ``products``, added in their order from 0.0 (``None``
+    for no terms)."""
     terms = [f"{a} * {b}" for a, b in products]
     if not terms:
         return None
-    if len(terms) == 1:
-        return f"(0.0 + {terms[0]})"
-    return f"sum(({', '.join(terms)}))"
+    return f"(0.0 + {' + '.join(terms)})"

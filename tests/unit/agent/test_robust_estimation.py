@@ -67,6 +67,14 @@ def test_least_squares_forgetting_follows_a_change() -> None:
     assert fit.solve().estimate[0] == pytest.approx(2.0, abs=1e-3)
 
 
+def _dot(pairs) -> float:
+    """``Σ a·b``, term by term from 0.0."""
+    total = 0.0
+    for a, b in pairs:
+        total += a * b
+    return total
+
+
 def _solved_by_loops(m: list[float], v: list[float], p: int):
     """The normal equations solved by the textbook loops that the generated solver writes
     out (``normal_equations``' docstring): ``(p̂, M⁻¹, p̂ᵀ v)``, or ``None``."""
@@ -76,7 +84,7 @@ def _solved_by_loops(m: list[float], v: list[float], p: int):
     low = [0.0] * (p * p)
     for i in range(p):
         for j in range(i + 1):
-            total = m[i * p + j] - sum(low[i * p + k] * low[j * p + k] for k in range(j))
+            total = m[i * p + j] - _dot((low[i * p + k], low[j * p + k]) for k in range(j))
             if i == j:
                 if total <= 1e-13 * scale:
                     return None
@@ -87,15 +95,15 @@ def _solved_by_loops(m: list[float], v: list[float], p: int):
     for i in range(p):
         inv_low[i * p + i] = 1.0 / low[i * p + i]
         for j in range(i):
-            total = sum(low[i * p + k] * inv_low[k * p + j] for k in range(j, i))
+            total = _dot((low[i * p + k], inv_low[k * p + j]) for k in range(j, i))
             inv_low[i * p + j] = -total / low[i * p + i]
     inverse = tuple(
-        sum(inv_low[k * p + i] * inv_low[k * p + j] for k in range(max(i, j), p))
+        _dot((inv_low[k * p + i], inv_low[k * p + j]) for k in range(max(i, j), p))
         for i in range(p)
         for j in range(p)
     )
-    estimate = tuple(sum(inverse[i * p + j] * v[j] for j in range(p)) for i in range(p))
-    return estimate, inverse, sum(e * b for e, b in zip(estimate, v))
+    estimate = tuple(_dot((inverse[i * p + j], v[j]) for j in range(p)) for i in range(p))
+    return estimate, inverse, _dot(zip(estimate, v))
 
 
 @pytest.mark.parametrize("p", range(1, 8))
@@ -127,7 +135,7 @@ def test_normal_equations_are_the_loops_bit_for_bit(p: int) -> None:
             form = 0.0
             for i in range(p):
                 if g[i]:
-                    form += g[i] * sum(inverse[i * p + j] * g[j] for j in range(p))
+                    form += g[i] * _dot((inverse[i * p + j], g[j]) for j in range(p))
             assert quadratic_form(p)(inverse, g) == form
 
 
