@@ -387,7 +387,7 @@ class RobustPipeline(EstimationPipeline):
             "drive_gain": None if self.drive.std is None else self.drive.estimate,
             "drive_gain_std": self.drive.std,
             "relative_positions_cov": {
-                j: tuple(scale * e for e in cov) for j, cov in edges.items()
+                j: (scale * xx, scale * xy, scale * yy) for j, (xx, xy, yy) in edges.items()
             },
             "moment_std": None
             if moment_std is None
@@ -401,8 +401,10 @@ class RobustPipeline(EstimationPipeline):
             if found is not None:
                 scale = math.sqrt(PUBLISHED_VARIANCE.get(key, 1.0))
                 out[key], out[key + "_std"] = found[0], found[1] * scale
-        com_cov = self.com.covariance if self.com is not None else None
-        if contact_to_com is not None and edges and com_cov is not None:
+        com_cov = None
+        if contact_to_com is not None and edges and self.com is not None:
+            com_cov = self.com.covariance
+        if com_cov is not None:
             alpha = self.angle - self.push_angle
             (a, b), (_, d) = turned_covariance(com_cov, alpha)
             c = self.com.com_offset(alpha)
