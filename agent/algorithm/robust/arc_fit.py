@@ -111,6 +111,8 @@ class ArcRelativePosition:
         """``‖z_ij‖`` from :attr:`_solution`."""
         self._distance_std: float | None = None
         """Its standard deviation."""
+        self._last_estimate: tuple = (None, None, None)
+        """``(r̂, ψ̂, z_ij)`` of the last :attr:`estimate` made."""
 
     def update(self, zdot: Vec2, dt: float, *, follow: bool = True) -> None:
         """Feed ``ż_ij`` sampled ``dt`` after the last sample used."""
@@ -212,10 +214,14 @@ class ArcRelativePosition:
     @property
     def estimate(self) -> Vec2 | None:
         """``z_ij = r̂ (cos ψ̂, sin ψ̂)`` at the last sample used, in ``W`` then."""
-        r, psi = self.distance, self.direction
+        r, psi = self._distance, self.direction
         if r is None or psi is None:
             return None
-        return (r * math.cos(psi), r * math.sin(psi))
+        last_r, last_psi, z = self._last_estimate
+        if r is not last_r or psi is not last_psi:  # read several times a sample: made once
+            z = (r * math.cos(psi), r * math.sin(psi))
+            self._last_estimate = (r, psi, z)
+        return z
 
     @property
     def distance(self) -> float | None:

@@ -61,36 +61,34 @@ class DriveGain:
             ]
         ux, uy = command
         fx, fy = measured
-        state, sum_fy, sum_yy = self._state, self._fy, self._yy
+        self._ff += fx * fx + fy * fy
+        self.rows += 2
+        fitting, ff = self.rows >= MIN_ROWS, self._ff
+        # Each lag's unit-gain response over the tick, its sums, and (once there are enough
+        # rows) its fit, in one pass: the lag whose residual is least gives ĝ.
+        best: tuple[float, float] | None = None  # (ĝ, Σ ȳ²) of the best lag so far
+        least = 0.0  # its residual sum of squares
+        state, sums_fy, sums_yy = self._state, self._fy, self._yy
         for i, (a, c) in enumerate(self._decay):
             x0, y0 = state[i]
             dx, dy = x0 - ux, y0 - uy
             mx, my = ux + dx * c, uy + dy * c
             state[i] = (ux + dx * a, uy + dy * a)
-            sum_fy[i] += fx * mx + fy * my
-            sum_yy[i] += mx * mx + my * my
-        self._ff += fx * fx + fy * fy
-        self.rows += 2
-        self._fit = self._best() if self.rows >= MIN_ROWS else None
-
-    def _best(self) -> tuple[float, float] | None:
-        """``(ĝ, its variance)`` for the lag whose residual is least."""
-        ff = self._ff
-        best: tuple[float, float] | None = None  # (gain, Σ ȳ²)
-        least = 0.0  # its residual sum of squares
-        for fy, yy in zip(self._fy, self._yy):
-            if yy <= 0.0:
+            s_fy = sums_fy[i] = sums_fy[i] + (fx * mx + fy * my)
+            s_yy = sums_yy[i] = sums_yy[i] + (mx * mx + my * my)
+            if not fitting or s_yy <= 0.0:
                 continue
-            gain = fy / yy
-            rss = ff - gain * fy
+            gain = s_fy / s_yy
+            rss = ff - gain * s_fy
             if rss < 0.0:
                 rss = 0.0
             if best is None or rss < least:
-                best, least = (gain, yy), rss
+                best, least = (gain, s_yy), rss
         if best is None or best[0] <= 0.0:
-            return None
-        gain, yy = best
-        return gain, least / (self.rows - 2) / yy
+            self._fit = None
+        else:
+            gain, yy = best
+            self._fit = (gain, least / (self.rows - 2) / yy)
 
     @property
     def estimate(self) -> float:

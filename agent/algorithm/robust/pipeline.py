@@ -166,11 +166,9 @@ class RobustPipeline(EstimationPipeline):
             edge = edges[j]
             if edge.moving and abs(edge.last_dt - interval) < 1e-9:
                 fresh.append(edge)
-                weight = turn_weight(  # the radius is known once the circle is
-                    radius=edge.distance,
-                    speed2=z[0] * z[0] + z[1] * z[1],
-                    noise=edge.noise,
-                    dt=interval,
+                speed2 = z[0] * z[0] + z[1] * z[1]  # the radius is known once the circle is
+                weight = turn_weight(
+                    radius=edge.distance, speed2=speed2, noise=edge.noise, dt=interval
                 )
                 turns.append((edge.last_turn, weight))
         own = own_turn(turns)
