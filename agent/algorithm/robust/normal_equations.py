@@ -121,6 +121,7 @@ def _solve_source(p: int) -> str:
     emit(f"    scale = max(({''.join(f'abs(m{i}_{i}), ' for i in range(p))}))")
     emit("    if scale == 0.0 or not isfinite(scale):")
     emit("        return None")
+    emit("    limit = SINGULAR * scale")
     for i in range(p):  # L
         for j in range(i):
             products = _sum([(low(i, k), low(j, k)) for k in range(j)])
@@ -128,7 +129,7 @@ def _solve_source(p: int) -> str:
             emit(f"    {low(i, j)} = {numerator} / {low(j, j)}")
         products = _sum([(low(i, k), low(i, k)) for k in range(i)])
         emit(f"    t = m{i}_{i}" + ("" if products is None else f" - {products}"))
-        emit("    if t <= SINGULAR * scale:")
+        emit("    if t <= limit:")
         emit("        return None")
         emit(f"    {low(i, i)} = sqrt(t)")
     for i in range(p):  # U = L⁻¹
