@@ -114,10 +114,9 @@ def _solve_source(p: int) -> str:
 
     lines = ["def solve(m, v):"]
     emit = lines.append
-    for i in range(p):
-        for j in range(i + 1):
-            emit(f"    m{i}_{j} = m[{i * p + j}]")
-        emit(f"    v{i} = v[{i}]")
+    lower = [f"m{i}_{j}" if j <= i else "_" for i in range(p) for j in range(p)]
+    emit(f"    {''.join(f'{name}, ' for name in lower)}= m")
+    emit(f"    {''.join(f'v{i}, ' for i in range(p))}= v")
     emit(f"    scale = max(({''.join(f'abs(m{i}_{i}), ' for i in range(p))}))")
     emit("    if scale == 0.0 or not isfinite(scale):")
     emit("        return None")
