@@ -373,7 +373,8 @@ class RobustPipeline(EstimationPipeline):
             if cov is not None:
                 turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
                 edges[j] = packed(turned_covariance(cov, turned))
-        gain_std = self.drive.std or 0.0
+        drive_std = self.drive.std
+        gain_std = drive_std or 0.0
         team_gain_std = gain_std / math.sqrt(self.n)
         moment = self.moment
         moment_std = self.inertia.std if self.inertia is not None else None
@@ -382,8 +383,8 @@ class RobustPipeline(EstimationPipeline):
         _, mass_std = self._robust_mass()
         scale = PUBLISHED_VARIANCE["relative"]
         out: dict = {
-            "drive_gain": None if self.drive.std is None else self.drive.estimate,
-            "drive_gain_std": self.drive.std,
+            "drive_gain": None if drive_std is None else self.drive.estimate,
+            "drive_gain_std": drive_std,
             "relative_positions_cov": {
                 j: (scale * xx, scale * xy, scale * yy) for j, (xx, xy, yy) in edges.items()
             },
