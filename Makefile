@@ -32,8 +32,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 
 bench: $(STAMP)  ## Accuracy, step durations and speed: in one process, then over Zenoh.
-	$(BIN)/heft bench accuracy
-	$(BIN)/heft bench zenoh
+	$(BIN)/heft bench accuracy; status=$$?; $(BIN)/heft bench zenoh && exit $$status
 
 $(STAMP): pyproject.toml dashboard/package-lock.json
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 is needed"'

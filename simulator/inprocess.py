@@ -9,7 +9,8 @@ the team is done (and the scenario's :attr:`~simulator.scenario.Scenario.end_s` 
 load changes and its hold), halted, or at the scenario's ``max_time_s``. Ground truth is
 recorded beside the agents' estimates of the same instant, every ``record_every`` ticks and
 from the tick the run is over at, for evaluation only (an agent that lost a message may lag a
-tick: such instants are not recorded).
+tick: such instants are not recorded). Each agent's step calls are timed, so that the time each
+robot's estimators take can be told apart from the plant's (:attr:`RunOutcome.step_s`).
 
 ``link="can"`` is the reference of a run over the AGVs' CAN buses (``heft run --can``): every
 measurement and every command is clamped and quantised as it is when it crosses the bus
@@ -57,6 +58,9 @@ class RunOutcome:
     final: Sample
     history: list[Sample] = field(default_factory=list)
     phase_ticks: dict[str, int] = field(default_factory=dict)
+    step_s: dict[int, float] = field(default_factory=dict)
+    """Seconds each robot's agent spent in its step calls, by robot (in-process runs: each call
+    timed on the wall clock; the agents take turns on one thread)."""
     transport: dict = field(default_factory=dict)
     """What the transport reported (the Zenoh run: the plant's counters and latencies)."""
     reason: str = ""
@@ -116,6 +120,7 @@ def run_inprocess(
     transport = transport or InMemoryTransport(scenario.n, scenario.edges)
     history: History[Sample] = History()
     phase_ticks: dict[str, int] = {}
+    step_s = {agent.robot: 0.0 for agent in agents}
     started = time.perf_counter()
     verdict: Verdict | None = None
     over_at = -1  # the tick the run is over at (-1: not yet)
@@ -129,7 +134,10 @@ def run_inprocess(
                 on_measure(measurements)
             forces, shares = [], []
             for agent, measurement in zip(agents, measurements):
-                command, share = agent.step(measurement, transport.receive(agent.robot))
+                received = transport.receive(agent.robot)
+                began = time.perf_counter()
+                command, share = agent.step(measurement, received)
+                step_s[agent.robot] += time.perf_counter() - began
                 forces.append(command.force)
                 shares.append(share)
             for share in shares:
@@ -166,6 +174,7 @@ def run_inprocess(
         final=final,
         history=_with_final(history, final),
         phase_ticks=phase_ticks,
+        step_s=step_s,
     )
 
 

@@ -55,7 +55,10 @@ def largest_std(xx: float, xy: float, yy: float) -> float:
 
 def angle_between(a: Vec2, b: Vec2) -> float:
     """The signed angle in ``(-π, π]`` that turns the direction of ``a`` onto that of ``b``."""
-    return math.atan2(cross(a, b) + 0.0, dot(a, b))  # + 0.0: a -0.0 cross would give -π
+    ax, ay = a
+    bx, by = b
+    # atan2(a × b, a · b); + 0.0: a -0.0 cross would give -π
+    return math.atan2(ax * by - ay * bx + 0.0, ax * bx + ay * by)
 
 
 def arc_factor(turn: float) -> float:

@@ -1,14 +1,24 @@
-"""``heft bench accuracy``: accuracy, step durations and speed of in-process runs of a scenario.
+"""``heft bench accuracy``: accuracy, step durations and speed of in-process runs of a scenario,
+with each family of estimators.
 
 The scenario (by default the paper's, ``simulator/scenarios/paper.toml``) is run ``repeat``
-times in this process. The report gives the worst final errors (over robots and runs), the
-simulated time each paper step took (from the results' ``phases``), how much faster than real
-time the runs went (simulated time / wall-clock time: median, min and max over the runs) and the
-process's peak resident memory. It reports figures and checks no goal.
+times in this process with each family of estimators (:data:`FAMILIES`: the scenario with its
+``[agent] estimator`` set to each, everything else the same load, sensors and drives), the
+families taking turns. For the scenario's own estimators the report gives the worst final errors
+(over robots and runs) and the simulated time each paper step took (from the results'
+``phases``). For each family it gives how much faster than real time the runs went (simulated
+time / wall-clock time: median, min and max over the runs), the wall-clock time per simulated
+second and each agent's time in its step calls per simulated second (one process: the agents
+take turns on one thread, each call timed, :attr:`~simulator.inprocess.RunOutcome.step_s`;
+what is left is the plant's, the transport's and the recording's); then the ratio of the
+robust estimators' wall-clock time per simulated second to the paper's (the median over the
+rounds of each round's, whose two runs ran one after the other), and the process's peak
+resident memory. Its goal (:data:`GOALS`): that ratio at most 1.5.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import resource
 import statistics
 import sys
@@ -16,11 +26,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from agent.algorithm.tuning import Estimators
+from agent.platform.goals import Goal, Sense
 from simulator.inprocess import RunOutcome, run_inprocess
 from simulator.results import errors, step_times, team_phases
 from simulator.scenario import Scenario
 
 DEFAULT_REPEAT = 3
+FAMILIES = (Estimators.ROBUST, Estimators.PAPER)
+"""The families of estimators compared, each run on the same load."""
 ERROR_ROWS = (
     ("mass m", "mass_rel", 100.0, "%"),
     ("moment of inertia J", "moment_rel", 100.0, "%"),
@@ -29,6 +43,21 @@ ERROR_ROWS = (
 )
 """Label, key (:data:`~agent.platform.evaluation.ERROR_KEYS`), display scale and unit of each
 error the in-process benchmarks report."""
+GOALS = (
+    Goal(
+        "speed_ratio",
+        "robust / paper estimators, wall-clock time per simulated second",
+        1.5,
+        Sense.AT_MOST,
+    ),
+)
+
+
+def with_estimators(scenario: Scenario, family: Estimators) -> Scenario:
+    """``scenario`` with its agents running ``family``, all else the same."""
+    return dataclasses.replace(
+        scenario, agent=dataclasses.replace(scenario.agent, estimator=family)
+    )
 
 
 @dataclass
@@ -37,13 +66,44 @@ class BenchReport:
 
     scenario: Scenario
     source: str
-    outcomes: list[RunOutcome]
+    runs: dict[Estimators, list[RunOutcome]]
+    """Each family's runs, in the order they ran."""
     peak_rss_bytes: int
 
     @property
-    def speedups(self) -> list[float]:
-        """Simulated time / wall-clock time of each run."""
-        return [o.sim_time_s / o.wall_s if o.wall_s > 0 else float("inf") for o in self.outcomes]
+    def outcomes(self) -> list[RunOutcome]:
+        """The runs of the scenario's own estimators."""
+        return self.runs[self.scenario.agent.estimator]
+
+    def speedups(self, family: Estimators) -> list[float]:
+        """Simulated time / wall-clock time of each run of ``family``."""
+        return [
+            o.sim_time_s / o.wall_s if o.wall_s > 0 else float("inf") for o in self.runs[family]
+        ]
+
+    def wall_per_simulated_s(self, family: Estimators) -> float:
+        """The median over ``family``'s runs of the wall-clock time per simulated second."""
+        return statistics.median(o.wall_s / o.sim_time_s for o in self.runs[family])
+
+    def step_per_simulated_s(self, family: Estimators) -> dict[int, float]:
+        """Per robot, the median over ``family``'s runs of its agent's time in its step calls
+        per simulated second."""
+        outcomes = self.runs[family]
+        return {
+            robot: statistics.median(o.step_s[robot] / o.sim_time_s for o in outcomes)
+            for robot in outcomes[0].step_s
+        }
+
+    @property
+    def speed_ratio(self) -> float:
+        """The robust estimators' wall-clock time per simulated second over the paper's: the
+        median over the rounds of each round's ratio (the two runs of a round are next to each
+        other in time, so that a machine busy with other work slows both alike)."""
+        rounds = zip(self.runs[Estimators.ROBUST], self.runs[Estimators.PAPER])
+        return statistics.median(
+            (robust.wall_s / robust.sim_time_s) / (paper.wall_s / paper.sim_time_s)
+            for robust, paper in rounds
+        )
 
 
 def peak_rss_bytes() -> int:
@@ -56,18 +116,27 @@ def run_benchmark(
     scenario: Scenario,
     repeat: int = DEFAULT_REPEAT,
     source: str = "",
-    on_run: Callable[[int, RunOutcome], None] | None = None,
+    on_run: Callable[[int, Estimators, RunOutcome], None] | None = None,
 ) -> BenchReport:
-    """Run ``scenario`` ``repeat`` times in-process; ``on_run(k, outcome)`` after run ``k``."""
+    """Run ``scenario`` ``repeat`` times in-process with each of :data:`FAMILIES`, taking
+    turns (the first family first in odd rounds, last in even ones); ``on_run(k, family,
+    outcome)`` after each run of round ``k``."""
     if repeat < 1:
         raise ValueError(f"repeat must be at least 1, got {repeat}")
-    outcomes = []
+    runs: dict[Estimators, list[RunOutcome]] = {family: [] for family in FAMILIES}
     for k in range(1, repeat + 1):
-        outcome = run_inprocess(scenario)
-        outcomes.append(outcome)
-        if on_run is not None:
-            on_run(k, outcome)
-    return BenchReport(scenario, source or scenario.name, outcomes, peak_rss_bytes())
+        for family in FAMILIES if k % 2 else reversed(FAMILIES):
+            outcome = run_inprocess(with_estimators(scenario, family))
+            runs[family].append(outcome)
+            if on_run is not None:
+                on_run(k, family, outcome)
+    return BenchReport(scenario, source or scenario.name, runs, peak_rss_bytes())
+
+
+def figures(report: BenchReport) -> dict[str, float | None]:
+    """The figures :data:`GOALS` bound: the robust / paper ratio of the wall-clock time per
+    simulated second."""
+    return {"speed_ratio": report.speed_ratio}
 
 
 def _worst_over_runs(report: BenchReport, key: str) -> float | None:
@@ -81,7 +150,10 @@ def _error_line(label: str, value: float | None, scale: float, unit: str) -> str
 
 
 def _accuracy_lines(report: BenchReport) -> list[str]:
-    lines = ["accuracy (worst over robots and runs, at the final instant):"]
+    lines = [
+        f"accuracy, {report.scenario.agent.estimator.value} estimators (worst over robots and"
+        " runs, at the final instant):"
+    ]
     lines += [
         _error_line(label, _worst_over_runs(report, key), s, u) for label, key, s, u in ERROR_ROWS
     ]
@@ -113,14 +185,41 @@ def _step_lines(outcome: RunOutcome) -> list[str]:
 
 
 def _speed_lines(report: BenchReport) -> list[str]:
-    speedups = report.speedups
-    sim = statistics.median(o.sim_time_s for o in report.outcomes)
-    wall = statistics.median(o.wall_s for o in report.outcomes)
-    return [
-        f"speed: {sim:.2f} s simulated in {wall:.3f} s wall (median of {len(speedups)} runs)",
-        f"  {statistics.median(speedups):.1f}x faster than real time"
-        f" (min {min(speedups):.1f}x, max {max(speedups):.1f}x)",
+    runs = len(report.runs[FAMILIES[0]])
+    lines = [
+        f"speed, each family of estimators on this load (median of {runs} runs each; wall ="
+        " wall-clock time):",
+        f"  {'estimators':<10} {'converged':>9} {'simulated':>9} {'wall/sim s':>10}"
+        f"  faster than real time (min, max)",
     ]
+    for family in FAMILIES:
+        outcomes, speedups = report.runs[family], report.speedups(family)
+        converged = sum(o.converged for o in outcomes)
+        simulated = statistics.median(o.sim_time_s for o in outcomes)
+        lines.append(
+            f"  {family.value:<10} {f'{converged}/{len(outcomes)}':>9} {simulated:8.2f}s"
+            f" {1000 * report.wall_per_simulated_s(family):7.1f} ms"
+            f"  {statistics.median(speedups):.1f}x ({min(speedups):.1f}x, {max(speedups):.1f}x)"
+        )
+    lines.append(
+        f"  robust / paper, wall per simulated second: {report.speed_ratio:.2f} (median of the"
+        " rounds' ratios)"
+    )
+    robots = sorted(report.runs[FAMILIES[0]][0].step_s)
+    lines += [
+        "each agent's time in its step calls per simulated second (median; one process: the",
+        "agents take turns on one thread, each call timed; the rest is the plant's, the",
+        "transport's and the recording's):",
+        f"  {'estimators':<10} " + " ".join(f"{f'robot {i}':>8}" for i in robots) + "  all",
+    ]
+    for family in FAMILIES:
+        per_robot = report.step_per_simulated_s(family)
+        lines.append(
+            f"  {family.value:<10} "
+            + " ".join(f"{1000 * per_robot[i]:5.2f} ms" for i in robots)
+            + f"  {1000 * sum(per_robot.values()):.1f} ms"
+        )
+    return lines
 
 
 def _display_path(source: str) -> str:
@@ -133,17 +232,17 @@ def _display_path(source: str) -> str:
 
 def format_report(report: BenchReport) -> str:
     """The plain-text report of ``heft bench accuracy``."""
-    converged = sum(o.converged for o in report.outcomes)
-    total = len(report.outcomes)
+    own = report.outcomes
     lines = [
         f"heft bench accuracy: scenario {report.scenario.name!r}, {report.scenario.n} robots,"
-        f" {total} in-process runs",
+        f" {len(own)} in-process runs with each family of estimators",
         f"scenario file: {_display_path(report.source)}",
-        f"converged: {converged}/{total}",
+        f"converged ({report.scenario.agent.estimator.value} estimators, the scenario's own):"
+        f" {sum(o.converged for o in own)}/{len(own)}",
         "",
         *_accuracy_lines(report),
         "",
-        *_step_lines(report.outcomes[0]),
+        *_step_lines(own[0]),
         "",
         *_speed_lines(report),
         f"peak RSS: {report.peak_rss_bytes / 2**20:.0f} MiB",

@@ -27,6 +27,7 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from operator import mul
 
 PLATEAU = 0.02
 """An uncertainty that shrank by less than this fraction over a window has stopped shrinking."""
@@ -70,7 +71,7 @@ class SettleDetector:
         if std is not None:
             self._stds.append(std)
         if std is not None and not (self.iterated and past):
-            size = max(math.sqrt(sum(v * v for v in value)), scale)
+            size = max(math.sqrt(sum(map(mul, value, value))), scale)
             self.streak = self.streak + 1 if self._certain(std, size) else 0
         elif past:
             last, oldest = past[-1], past[0]

@@ -102,8 +102,17 @@ class ArcRelativePosition:
         """``ż_ij`` at the sample before the last one used."""
         self._second = [0.0, 0.0]
         """The (forgotten) sum of the squared second differences of ``ż_ij``, and its count."""
+        self.noise = 0.0
+        """``σ_e²``: the relative velocity's noise variance per axis (m²/s²), measured (0 until
+        a second difference is)."""
         self._solution: Solution | None = None
         """The fit after the last sample used, once it determines the circle."""
+        self._distance: float | None = None
+        """``‖z_ij‖`` from :attr:`_solution`."""
+        self._distance_std: float | None = None
+        """Its standard deviation."""
+        self._last_estimate: tuple = (None, None, None)
+        """``(r̂, ψ̂, z_ij)`` of the last :attr:`estimate` made."""
 
     def update(self, zdot: Vec2, dt: float, *, follow: bool = True) -> None:
         """Feed ``ż_ij`` sampled ``dt`` after the last sample used."""
@@ -119,38 +128,26 @@ class ArcRelativePosition:
         h = 0.5 * dt
         sx = self.s[0] + h * (self.zdot[0] + zdot[0])
         sy = self.s[1] + h * (self.zdot[1] + zdot[1])
-        turn = angle_between(self.zdot, zdot)
-        self._measure_noise(zdot)
+        if self._before is not None:  # the noise, from the second difference of ż_ij
+            ex = zdot[0] - 2.0 * self.zdot[0] + self._before[0]
+            ey = zdot[1] - 2.0 * self.zdot[1] + self._before[1]
+            lam, second = self.fit.forgetting, self._second
+            second[0] = lam * second[0] + ex * ex + ey * ey
+            second[1] = lam * second[1] + 1.0
+            self.noise = second[0] / (12.0 * second[1])
         self.s = (sx, sy)
         self._before, self.zdot = self.zdot, zdot
         self.last_dt = dt
         self._add(self.s)
-        c = self.centre
-        if c is not None:  # both ends about the same centre: its own refits are no turn
-            self.last_turn = angle_between(
-                (before[0] - c[0], before[1] - c[1]), (sx - c[0], sy - c[1])
-            )
+        fit = self._solution
+        if fit is not None:  # both ends about the same centre: its own refits are no turn
+            cx, cy = fit.estimate[0], fit.estimate[1]
+            self.last_turn = angle_between((before[0] - cx, before[1] - cy), (sx - cx, sy - cy))
             if follow:
                 self.follow(self.last_turn)
         else:
-            self.last_turn = turn  # ż_ij turns with z_ij
+            self.last_turn = angle_between(self._before, zdot)  # ż_ij turns with z_ij
             self.direction = None
-
-    def _measure_noise(self, zdot: Vec2) -> None:
-        before = self._before
-        if before is None:
-            return
-        ex = zdot[0] - 2.0 * self.zdot[0] + before[0]
-        ey = zdot[1] - 2.0 * self.zdot[1] + before[1]
-        lam, second = self.fit.forgetting, self._second
-        second[0] = lam * second[0] + ex * ex + ey * ey
-        second[1] = lam * second[1] + 1.0
-
-    @property
-    def noise(self) -> float:
-        """``σ_e²``: the relative velocity's noise variance per axis (m²/s²), measured."""
-        total, count = self._second
-        return total / (12.0 * count) if count else 0.0
 
     def follow(self, turn: float, variance: float | None = None) -> None:
         """One step of the direction filter (see the module docstring) at the last sample
@@ -158,14 +155,14 @@ class ArcRelativePosition:
         that of the arc's own increment, :attr:`last_turn`), then the sample measures it.
         :meth:`update` calls it with the arc's own increment unless told not to
         (``follow=False``: the caller then follows the team's turn)."""
-        if self.centre is None or not self.moving:
+        fit = self._solution
+        if fit is None or not self.moving:
             return
         zdot, dt = self.zdot, self.last_dt
-        r = self.distance
-        c = self.centre
-        arc = (self.s[0] - c[0], self.s[1] - c[1])
+        r = self._distance
         if self.direction is None:  # start from the arc, with its uncertainty
-            self.direction = math.atan2(arc[1], arc[0])
+            c = fit.estimate
+            self.direction = math.atan2(self.s[1] - c[1], self.s[0] - c[0])
             self.direction_var = (self._arc_std / r) ** 2
             return
         noise = self.noise
@@ -190,12 +187,19 @@ class ArcRelativePosition:
         x, y = s
         self.fit.add((2.0 * x, 2.0 * y, 1.0), x * x + y * y)
         solution = self.fit.solve() if self.fit.rows >= 10 else None
-        self._solution = None
-        if solution is not None:
-            self._solution = solution
-            r, std = self.distance, self.distance_std
-            if r is None or std is None or std > 0.5 * r:
-                self._solution = None
+        self._solution = self._distance = self._distance_std = None
+        if solution is None:
+            return
+        cx, cy, d = solution.estimate
+        r2 = d + cx * cx + cy * cy
+        if not r2 > 0.0:
+            return
+        r = math.sqrt(r2)
+        scale = CORRELATION * solution.rows
+        std = math.sqrt(solution.variance_of((cx / r, cy / r, 0.5 / r), scale))
+        if std > 0.5 * r:  # the circle not yet determined
+            return
+        self._solution, self._distance, self._distance_std = solution, r, std
 
     @property
     def _scale(self) -> float:
@@ -210,20 +214,19 @@ class ArcRelativePosition:
     @property
     def estimate(self) -> Vec2 | None:
         """``z_ij = r̂ (cos ψ̂, sin ψ̂)`` at the last sample used, in ``W`` then."""
-        r, psi = self.distance, self.direction
+        r, psi = self._distance, self.direction
         if r is None or psi is None:
             return None
-        return (r * math.cos(psi), r * math.sin(psi))
+        last_r, last_psi, z = self._last_estimate
+        if r is not last_r or psi is not last_psi:  # read several times a sample: made once
+            z = (r * math.cos(psi), r * math.sin(psi))
+            self._last_estimate = (r, psi, z)
+        return z
 
     @property
     def distance(self) -> float | None:
         """``‖z_ij‖ = √(d + ‖c‖²)``, the fitted radius."""
-        fit = self._solution
-        if fit is None:
-            return None
-        cx, cy, d = fit.estimate
-        r2 = d + cx * cx + cy * cy
-        return math.sqrt(r2) if r2 > 0.0 else None
+        return self._distance
 
     @property
     def covariance(self) -> Covariance | None:
@@ -265,10 +268,6 @@ class ArcRelativePosition:
 
     @property
     def distance_std(self) -> float | None:
-        """The standard deviation (m) of :attr:`distance`."""
-        r = self.distance
-        if r is None:
-            return None
-        fit = self._solution
-        cx, cy, _ = fit.estimate
-        return math.sqrt(fit.variance_of((cx / r, cy / r, 0.5 / r), self._scale))
+        """The standard deviation (m) of :attr:`distance`: the fit's, through
+        ``∂r/∂p = (c_x/r, c_y/r, 1/(2r))``, scaled by ``N`` and :data:`CORRELATION`."""
+        return self._distance_std

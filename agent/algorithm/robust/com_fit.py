@@ -36,6 +36,8 @@ of ``Ĵ``, which scales ``c`` (``c ∝ J``).
 
 from __future__ import annotations
 
+import math
+
 from agent.algorithm.robust.least_squares import RunFit
 from agent.platform.geometry import Vec2, arc_factor, largest_std, rotate
 
@@ -54,6 +56,10 @@ class ComFit(RunFit):
         self.lag = lag
         self.started = False
         self._alpha = 0.0
+        self._turned: Vec2 = (1.0, 0.0)
+        """``(cos, sin)`` of ``−α`` at the last sample."""
+        self._regressor: Vec2 = self.base
+        """The regressor ``(n/J) R(−α) Qᵀ f`` at the last sample."""
         self._once: Vec2 = (0.0, 0.0)
         """``∫φ`` since the first sample."""
         self._twice: Vec2 = (0.0, 0.0)
@@ -80,13 +86,16 @@ class ComFit(RunFit):
         mean force ``added`` and the load turned the way ``spin`` (the first call, at the
         push's first instant, starts)."""
         k = self.k
-        extra = (k * added[1], -k * added[0])  # (n/J) Qᵀ a
+        ax, ay = k * added[1], -k * added[0]  # (n/J) Qᵀ a
+        c, s = math.cos(-alpha), math.sin(-alpha)  # R(−α)
+        bx, by = self.base
+        px, py = c * bx - s * by, s * bx + c * by  # the regressor (n/J) R(−α) Qᵀ f
+        ex, ey = c * ax - s * ay, s * ax + c * ay  # (n/J) R(−α) Qᵀ a
         if self.started:
-            p0 = self.regressor(self._alpha)
-            phi = self.regressor(alpha)
-            e0, e1 = rotate(extra, -self._alpha), rotate(extra, -alpha)
-            p0 = (sign * p0[0] + e0[0], sign * p0[1] + e0[1])
-            phi = (sign * phi[0] + e1[0], sign * phi[1] + e1[1])
+            (c0, s0), (qx, qy) = self._turned, self._regressor  # at the last α
+            e0 = (c0 * ax - s0 * ay, s0 * ax + c0 * ay)
+            p0 = (sign * qx + e0[0], sign * qy + e0[1])
+            phi = (sign * px + ex, sign * py + ey)
             once, twice = self._once, self._twice
             h = 0.5 * dt * arc_factor(alpha - self._alpha)
             dd = dt * dt
@@ -99,10 +108,8 @@ class ComFit(RunFit):
             self._spin_once += spin * dt
             self.t += dt
         self.started = True
-        self._alpha = alpha
+        self._alpha, self._turned, self._regressor = alpha, (c, s), (px, py)
         (sx, sy), (ox, oy), lag = self._twice, self._once, self.lag
-        px, py = self.regressor(alpha)
-        ex, ey = rotate(extra, -alpha)
         lag2, lagged = lag * lag * sign, lag * lag
         self.fit.add(
             (
@@ -128,8 +135,8 @@ class ComFit(RunFit):
         fit = self._solution
         if fit is None:
             return None
-        cov = fit.covariance(self._scale)
-        return ((cov[2][2], cov[2][3]), (cov[3][2], cov[3][3]))
+        (xx, xy), (yx, yy) = fit.covariance(self._scale, of=(2, 3))
+        return ((xx, xy), (yx, yy))
 
     @property
     def std(self) -> float | None:

@@ -61,30 +61,34 @@ class DriveGain:
             ]
         ux, uy = command
         fx, fy = measured
-        for i, (a, c) in enumerate(self._decay):
-            x0, y0 = self._state[i]
-            mx, my = ux + (x0 - ux) * c, uy + (y0 - uy) * c
-            self._state[i] = (ux + (x0 - ux) * a, uy + (y0 - uy) * a)
-            self._fy[i] += fx * mx + fy * my
-            self._yy[i] += mx * mx + my * my
         self._ff += fx * fx + fy * fy
         self.rows += 2
-        self._fit = self._best() if self.rows >= MIN_ROWS else None
-
-    def _best(self) -> tuple[float, float] | None:
-        """``(ĝ, its variance)`` for the lag whose residual is least."""
-        best = None  # (gain, residual sum of squares, Σ ȳ²)
-        for fy, yy in zip(self._fy, self._yy):
-            if yy <= 0.0:
+        fitting, ff = self.rows >= MIN_ROWS, self._ff
+        # Each lag's unit-gain response over the tick, its sums, and (once there are enough
+        # rows) its fit, in one pass: the lag whose residual is least gives ĝ.
+        best: tuple[float, float] | None = None  # (ĝ, Σ ȳ²) of the best lag so far
+        least = 0.0  # its residual sum of squares
+        state, sums_fy, sums_yy = self._state, self._fy, self._yy
+        for i, (a, c) in enumerate(self._decay):
+            x0, y0 = state[i]
+            dx, dy = x0 - ux, y0 - uy
+            mx, my = ux + dx * c, uy + dy * c
+            state[i] = (ux + dx * a, uy + dy * a)
+            s_fy = sums_fy[i] = sums_fy[i] + (fx * mx + fy * my)
+            s_yy = sums_yy[i] = sums_yy[i] + (mx * mx + my * my)
+            if not fitting or s_yy <= 0.0:
                 continue
-            gain = fy / yy
-            rss = max(self._ff - gain * fy, 0.0)
-            if best is None or rss < best[1]:
-                best = (gain, rss, yy)
+            gain = s_fy / s_yy
+            rss = ff - gain * s_fy
+            if rss < 0.0:
+                rss = 0.0
+            if best is None or rss < least:
+                best, least = (gain, s_yy), rss
         if best is None or best[0] <= 0.0:
-            return None
-        gain, rss, yy = best
-        return gain, rss / (self.rows - 2) / yy
+            self._fit = None
+        else:
+            gain, yy = best
+            self._fit = (gain, least / (self.rows - 2) / yy)
 
     @property
     def estimate(self) -> float:

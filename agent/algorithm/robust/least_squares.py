@@ -9,13 +9,17 @@ positive definite), the residual sum of squares is ``Σ b² − p̂ᵀ v``, and 
 covariance ``σ̂² M⁻¹`` with ``σ̂² = RSS / (N − p)`` — for independent residuals. The estimators
 say how they scale it when theirs are not.
 
-Plain floats, no numpy: ``p ≤ 4`` here, where small arrays cost more than they save.
+Plain floats, no numpy: ``p ≤ 7`` here, where small arrays cost more than they save; the
+normal equations are solved by code written out for ``p`` (:mod:`agent.algorithm.robust.
+normal_equations`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+
+from agent.algorithm.robust.normal_equations import accumulator, quadratic_form, solver
 
 
 class LeastSquares:
@@ -31,42 +35,35 @@ class LeastSquares:
         self.rows = 0.0
         """The (forgotten) number of rows."""
         self._m = [0.0] * (params * params)
+        """``M``, row-major (its lower triangle kept: it is symmetric)."""
         self._v = [0.0] * params
         self._bb = 0.0
+        self._add = accumulator(params)
+        self._solve = solver(params)
 
     def add(self, row: Sequence[float], target: float) -> None:
-        """One more row ``rowᵀ p ≈ target``."""
-        p, m, v, lam = self.params, self._m, self._v, self.forgetting
+        """One more row ``rowᵀ p ≈ target`` (``row``: ``p`` numbers)."""
+        m, v, lam = self._m, self._v, self.forgetting
         if lam != 1.0:
-            for i in range(p * p):
-                m[i] *= lam
-            for i in range(p):
-                v[i] *= lam
+            self._m = m = [lam * x for x in m]
+            self._v = v = [lam * x for x in v]
             self._bb *= lam
             self.rows *= lam
-        for i in range(p):
-            ai = row[i]
-            if ai == 0.0:
-                continue
-            v[i] += ai * target
-            base = i * p
-            for j in range(p):
-                m[base + j] += ai * row[j]
+        self._add(m, v, row, target)
         self._bb += target * target
         self.rows += 1.0
 
     def solve(self) -> Solution | None:
-        """``p̂``, ``M⁻¹`` and ``σ̂²``, or ``None`` while the rows do not determine ``p``."""
+        """``p̂``, ``M⁻¹`` and ``σ̂²``, or ``None`` while the rows do not determine ``p``
+        (fewer than ``p + 1`` rows, or ``M`` singular to working precision)."""
         p = self.params
         if self.rows <= p:
             return None
-        chol = _cholesky(self._m, p)
-        if chol is None:
+        solved = self._solve(self._m, self._v)
+        if solved is None:
             return None
-        inverse = _inverse_from_cholesky(chol, p)
-        v = self._v
-        estimate = tuple(sum(inverse[i * p + j] * v[j] for j in range(p)) for i in range(p))
-        rss = max(self._bb - sum(e * b for e, b in zip(estimate, v)), 0.0)
+        estimate, inverse, explained = solved
+        rss = max(self._bb - explained, 0.0)
         return Solution(estimate, inverse, rss / (self.rows - p), self.rows)
 
 
@@ -116,11 +113,15 @@ class ReciprocalFit(RunFit):
     positive, and :attr:`std` its standard deviation."""
 
     index = 2
+    _std: float | None = None
+    """:attr:`std`, from the last solve."""
 
     def _solve(self) -> None:
         super()._solve()
-        if self._solution is not None and self._solution.estimate[self.index] <= 0.0:
-            self._solution = None
+        fit = self._solution
+        if fit is not None and fit.estimate[self.index] <= 0.0:
+            self._solution = fit = None
+        self._std = None if fit is None else fit.reciprocal(self.index, self._scale)[1]
 
     @property
     def estimate(self) -> float | None:
@@ -130,9 +131,8 @@ class ReciprocalFit(RunFit):
 
     @property
     def std(self) -> float | None:
-        """The standard deviation of :attr:`estimate`."""
-        fit = self._solution
-        return None if fit is None else fit.reciprocal(self.index, self._scale)[1]
+        """The standard deviation of :attr:`estimate` (kept from the last solve)."""
+        return self._std
 
     @property
     def covariance(self) -> tuple[tuple[float]] | None:
@@ -153,11 +153,13 @@ class Solution:
         self.variance = variance
         self.rows = rows
 
-    def covariance(self, scale: float = 1.0) -> list[list[float]]:
-        """``scale · σ̂² M⁻¹``."""
+    def covariance(self, scale: float = 1.0, of: Sequence[int] | None = None) -> list[list[float]]:
+        """``scale · σ̂² M⁻¹``, or its rows and columns ``of`` (the covariance of those
+        parameters)."""
         p = len(self.estimate)
         k = scale * self.variance
-        return [[k * self.inverse[i * p + j] for j in range(p)] for i in range(p)]
+        indices = range(p) if of is None else of
+        return [[k * self.inverse[i * p + j] for j in indices] for i in indices]
 
     def reciprocal(self, index: int, scale: float = 1.0) -> tuple[float, float]:
         """``1/p̂_index`` and its standard deviation ``std(p̂_index) / p̂_index²`` (first
@@ -170,45 +172,5 @@ class Solution:
 
     def variance_of(self, gradient: Sequence[float], scale: float = 1.0) -> float:
         """``scale · σ̂² gᵀ M⁻¹ g``: the variance of a function of ``p̂`` with gradient ``g``."""
-        p = len(self.estimate)
-        inv = self.inverse
-        total = 0.0
-        for i in range(p):
-            gi = gradient[i]
-            if gi:
-                total += gi * sum(inv[i * p + j] * gradient[j] for j in range(p))
+        total = quadratic_form(len(self.estimate))(self.inverse, gradient)
         return max(scale * self.variance * total, 0.0)
-
-
-def _cholesky(m: list[float], p: int) -> list[float] | None:
-    """Lower-triangular ``L`` with ``L Lᵀ = m`` (row-major), or ``None`` unless ``m`` is
-    positive definite to working precision."""
-    scale = max(abs(m[i * p + i]) for i in range(p))
-    if scale == 0.0 or not math.isfinite(scale):
-        return None
-    low = [0.0] * (p * p)
-    for i in range(p):
-        for j in range(i + 1):
-            total = m[i * p + j] - sum(low[i * p + k] * low[j * p + k] for k in range(j))
-            if i == j:
-                if total <= 1e-13 * scale:
-                    return None
-                low[i * p + i] = math.sqrt(total)
-            else:
-                low[i * p + j] = total / low[j * p + j]
-    return low
-
-
-def _inverse_from_cholesky(low: list[float], p: int) -> tuple[float, ...]:
-    """``(L Lᵀ)⁻¹`` from ``L``: invert ``L``, then ``L⁻ᵀ L⁻¹``."""
-    inv_low = [0.0] * (p * p)
-    for i in range(p):
-        inv_low[i * p + i] = 1.0 / low[i * p + i]
-        for j in range(i):
-            total = sum(low[i * p + k] * inv_low[k * p + j] for k in range(j, i))
-            inv_low[i * p + j] = -total / low[i * p + i]
-    return tuple(
-        sum(inv_low[k * p + i] * inv_low[k * p + j] for k in range(max(i, j), p))
-        for i in range(p)
-        for j in range(p)
-    )

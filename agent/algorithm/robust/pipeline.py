@@ -159,32 +159,32 @@ class RobustPipeline(EstimationPipeline):
         ω times the interval), plus the consensus on the neighbours' levels; each such edge's
         direction filter then follows it."""
         fallback = (self.omega or 0.0) * interval
-        fresh = [
-            j
-            for j in zdots
-            if self.edges[j].moving and abs(self.edges[j].last_dt - interval) < 1e-9
-        ]
+        edges = self.edges
+        fresh = []
         turns = []
-        for j in fresh:
-            edge, z = self.edges[j], zdots[j]
-            radius = edge.distance if edge.centre is not None else None
-            weight = turn_weight(
-                radius=radius, speed2=z[0] * z[0] + z[1] * z[1], noise=edge.noise, dt=interval
-            )
-            turns.append((edge.last_turn, weight))
+        for j, z in zdots.items():
+            edge = edges[j]
+            if edge.moving and abs(edge.last_dt - interval) < 1e-9:
+                fresh.append(edge)
+                speed2 = z[0] * z[0] + z[1] * z[1]  # the radius is known once the circle is
+                weight = turn_weight(
+                    radius=edge.distance, speed2=speed2, noise=edge.noise, dt=interval
+                )
+                turns.append((edge.last_turn, weight))
         own = own_turn(turns)
         heard = (
             (j, s.degree, s.instant, s.consensus.rotation, s.consensus.mean_turn_variance)
             for j, s in inbox.latest.items()
-            if j in self.edges
+            if j in edges
         )
         turn, variance = (fallback, None) if own is None else own
         rotation = self.rotation
         turn = rotation.update(self.instant, turn, variance, heard, self._angle_at.get)
+        variance = rotation.turn_variance
         for j in zdots:
-            edge = self.edges[j]
-            if j in fresh:
-                edge.follow(turn, rotation.turn_variance)
+            edge = edges[j]
+            if edge in fresh:
+                edge.follow(turn, variance)
             else:
                 edge.follow(edge.last_turn)
         return turn
@@ -373,7 +373,8 @@ class RobustPipeline(EstimationPipeline):
             if cov is not None:
                 turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
                 edges[j] = packed(turned_covariance(cov, turned))
-        gain_std = self.drive.std or 0.0
+        drive_std = self.drive.std
+        gain_std = drive_std or 0.0
         team_gain_std = gain_std / math.sqrt(self.n)
         moment = self.moment
         moment_std = self.inertia.std if self.inertia is not None else None
@@ -382,10 +383,10 @@ class RobustPipeline(EstimationPipeline):
         _, mass_std = self._robust_mass()
         scale = PUBLISHED_VARIANCE["relative"]
         out: dict = {
-            "drive_gain": None if self.drive.std is None else self.drive.estimate,
-            "drive_gain_std": self.drive.std,
+            "drive_gain": None if drive_std is None else self.drive.estimate,
+            "drive_gain_std": drive_std,
             "relative_positions_cov": {
-                j: tuple(scale * e for e in cov) for j, cov in edges.items()
+                j: (scale * xx, scale * xy, scale * yy) for j, (xx, xy, yy) in edges.items()
             },
             "moment_std": None
             if moment_std is None
@@ -399,8 +400,10 @@ class RobustPipeline(EstimationPipeline):
             if found is not None:
                 scale = math.sqrt(PUBLISHED_VARIANCE.get(key, 1.0))
                 out[key], out[key + "_std"] = found[0], found[1] * scale
-        com_cov = self.com.covariance if self.com is not None else None
-        if contact_to_com is not None and edges and com_cov is not None:
+        com_cov = None
+        if contact_to_com is not None and edges and self.com is not None:
+            com_cov = self.com.covariance
+        if com_cov is not None:
             alpha = self.angle - self.push_angle
             (a, b), (_, d) = turned_covariance(com_cov, alpha)
             c = self.com.com_offset(alpha)

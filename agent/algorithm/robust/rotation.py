@@ -41,6 +41,7 @@ by ``a_ij`` times a disagreement of the order of one turn's noise: a negligible 
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterable
 
@@ -76,6 +77,7 @@ def own_turn(turns: Iterable[tuple[float, float]]) -> tuple[float, float] | None
     return (total / weight, 1.0 / weight) if weight > 0.0 else None
 
 
+@functools.cache
 def delay_factor(delay: int) -> float:
     """``ρ_d = sin(π / (2 (2d + 1)))`` for a level ``d ≥ 0`` instants older than the
     previous instant. ``x ← x − c x(k−d)`` is stable for ``c < 2 ρ_d``, and a Metropolis

@@ -156,7 +156,7 @@ def test_bench_help_shows_the_benchmark_default(capsys: pytest.CaptureFixture[st
 
     with pytest.raises(SystemExit):
         main(["bench", "accuracy", "--help"])
-    assert f"number of runs (default: {DEFAULT_REPEAT})" in capsys.readouterr().out
+    assert f"number of runs with each family (default: {DEFAULT_REPEAT})" in capsys.readouterr().out
     assert build_parser().parse_args(["bench", "accuracy"]).repeat == DEFAULT_REPEAT
 
 

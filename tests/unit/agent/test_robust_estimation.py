@@ -19,6 +19,7 @@ from agent.algorithm.robust.drive_gain import DriveGain
 from agent.algorithm.robust.inertia_fit import InertiaFit
 from agent.algorithm.robust.least_squares import LeastSquares
 from agent.algorithm.robust.mass_fit import MassFit
+from agent.algorithm.robust.normal_equations import accumulator, quadratic_form, solver
 from agent.algorithm.robust.phases import RobustPhases
 from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import AgentConfig, AgentTuning, Estimators
@@ -64,6 +65,78 @@ def test_least_squares_forgetting_follows_a_change() -> None:
     for k in range(1000):
         fit.add((1.0,), 1.0 if k < 500 else 2.0)
     assert fit.solve().estimate[0] == pytest.approx(2.0, abs=1e-3)
+
+
+def _dot(pairs) -> float:
+    """``Σ a·b``, term by term from 0.0."""
+    total = 0.0
+    for a, b in pairs:
+        total += a * b
+    return total
+
+
+def _solved_by_loops(m: list[float], v: list[float], p: int):
+    """The normal equations solved by the textbook loops that the generated solver writes
+    out (``normal_equations``' docstring): ``(p̂, M⁻¹, p̂ᵀ v)``, or ``None``."""
+    scale = max(abs(m[i * p + i]) for i in range(p))
+    if scale == 0.0 or not math.isfinite(scale):
+        return None
+    low = [0.0] * (p * p)
+    for i in range(p):
+        for j in range(i + 1):
+            total = m[i * p + j] - _dot((low[i * p + k], low[j * p + k]) for k in range(j))
+            if i == j:
+                if total <= 1e-13 * scale:
+                    return None
+                low[i * p + i] = math.sqrt(total)
+            else:
+                low[i * p + j] = total / low[j * p + j]
+    inv_low = [0.0] * (p * p)
+    for i in range(p):
+        inv_low[i * p + i] = 1.0 / low[i * p + i]
+        for j in range(i):
+            total = _dot((low[i * p + k], inv_low[k * p + j]) for k in range(j, i))
+            inv_low[i * p + j] = -total / low[i * p + i]
+    inverse = tuple(
+        _dot((inv_low[k * p + i], inv_low[k * p + j]) for k in range(max(i, j), p))
+        for i in range(p)
+        for j in range(p)
+    )
+    estimate = tuple(_dot((inverse[i * p + j], v[j]) for j in range(p)) for i in range(p))
+    return estimate, inverse, _dot(zip(estimate, v))
+
+
+@pytest.mark.parametrize("p", range(1, 8))
+def test_normal_equations_are_the_loops_bit_for_bit(p: int) -> None:
+    rng = np.random.default_rng(p)
+    for trial in range(20):
+        rows = rng.normal(size=(3 * p, p)) * rng.uniform(1e-3, 1e3, size=p)
+        if trial % 5 == 0:
+            rows[:, -1] = 0.0  # a parameter the rows never reach: singular
+        m, v = [0.0] * (p * p), [0.0] * p
+        m_loops, v_loops = [0.0] * (p * p), [0.0] * p
+        add = accumulator(p)
+        for row, target in zip(rows.tolist(), rng.normal(size=3 * p).tolist()):
+            add(m, v, row, target)
+            for i in range(p):  # the loops it writes out (here over all of M)
+                v_loops[i] += row[i] * target
+                for j in range(p):
+                    m_loops[i * p + j] += row[i] * row[j]
+        assert v == v_loops
+        assert [m[i * p + j] for i in range(p) for j in range(i + 1)] == [
+            m_loops[i * p + j] for i in range(p) for j in range(i + 1)
+        ]
+        expected = _solved_by_loops(m_loops, v, p)
+        assert solver(p)(m, v) == expected
+        assert (expected is None) == (trial % 5 == 0)
+        if expected is not None:
+            inverse = expected[1]
+            g = (rng.normal(size=p) * (rng.uniform(size=p) < 0.7)).tolist()  # some g_i = 0
+            form = 0.0
+            for i in range(p):
+                if g[i]:
+                    form += g[i] * _dot((inverse[i * p + j], g[j]) for j in range(p))
+            assert quadratic_form(p)(inverse, g) == form
 
 
 # ------------------------------------------------------------------------------ Step 1
