@@ -32,11 +32,17 @@ takes its new mass, moment and COM before the period is integrated (:meth:`Plant
 The load frame stays where it is, and so do the contacts and their velocities; only the COM
 moves within the load.
 
+The floor (``scenario.ground``): without it the load slides on nothing, as in the paper; with
+it every physics substep is :meth:`simulator.friction.GroundContact.step`, which adds the
+floor's friction at the load's supports, and the truth carries the friction applied
+(:mod:`simulator.friction`).
+
 Implementation notes (pymunk 7): the body carries the scenario's mass and moment and has no
 shapes (a shape with a density would override them); space gravity is zero and damping is off;
 ``body.force``/``body.torque`` are cleared by every step, so the held forces are re-applied at
 the contacts' *current* world points before every physics substep. The per-substep path uses
-plain floats and pymunk calls only (no numpy) to keep the plant far faster than real time.
+plain floats and pymunk calls only (no numpy but the floor's one product over its supports) to
+keep the plant far faster than real time.
 """
 
 from __future__ import annotations
@@ -86,10 +92,9 @@ class Plant:
         body.angle = float(spec.angle)
         body.position = (float(spec.position[0]), float(spec.position[1]))
         self._space.add(body)  # no shapes: they would override mass and moment
-        self._body = body
-        self._ground = None
-        if scenario.ground is not None:
-            self._ground = GroundContact(self._space, body, scenario.ground, self._dt)
+        self._body, space = body, self._space
+        ground = scenario.ground
+        self._ground = None if ground is None else GroundContact(space, body, ground, self._dt)
         """The floor's friction (:mod:`simulator.friction`); None: frictionless."""
         self._substep = self._free_step if self._ground is None else self._ground.step
         """One physics step with the robots' force and torque: ``(force, torque, cos θ, sin θ)``."""

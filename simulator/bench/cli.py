@@ -156,7 +156,7 @@ def cmd_generated(args: argparse.Namespace) -> int:
 def _add_generated(benchmarks: argparse._SubParsersAction) -> None:
     parser = benchmarks.add_parser(
         "generated",
-        help="generality without noise: the default estimators on the paper's and generated loads",
+        help="generality without noise: the default estimators on many loads",
         formatter_class=HelpFormatter,
         description=(
             "Run the default estimators (no [agent] table: the robust ones) without noise, once\n"

@@ -18,10 +18,11 @@
   load back towards where it started;
 - *done* (with ``change_threshold`` > 0): the team keeps watching the load, in cycles on the
   agreed clock: a gap of ``monitor_gap_s`` in which each robot damps the COM's velocity,
-  ``−b ṗ̂_C`` (Step 6's estimate: the load keeps its turn, which Step 5's fit needs, and loses
-  its drift), then a *probe* of ``probe_s = T``, the push's common force ``+f`` for ``T/4``,
-  ``−f`` for ``T/2`` and ``+f`` for ``T/4``: the COM's velocity and place come back to where
-  they were, after a swing of ``n f T²/16m``; every other probe swings the other way. A robot
+  ``−b ṗ̂_C`` (Step 6's estimate: the load loses its drift), and turns the load up to
+  ``pendulum_spin`` (a probe tells a moved COM by the turn), then a *probe* of
+  ``probe_s = T``, the push's common force ``+f`` for ``T/4``, ``−f`` for ``T/2`` and ``+f``
+  for ``T/4``: the COM's velocity and place come back to where they were, after a swing of
+  ``n f T²/16m``; every other probe swings the other way. A robot
   whose probe finds the load no longer the one estimated (:mod:`agent.algorithm.robust.
   load_change`) is ready to leave ``done``, and the team restarts at ``inertia`` at an agreed
   tick (:mod:`agent.algorithm.coordination`).
@@ -200,13 +201,18 @@ class RobustPhases(PhaseMachine):
         return -1.0 if middle == first else 1.0
 
     def _monitor_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
-        """A probe's common force, or the gap's damping of the COM's velocity."""
+        """A probe's common force with the torque that keeps the load turning against the
+        floor's friction, or the gap's damping of the COM's velocity with the load turned up
+        to ``pendulum_spin`` (a probe tells a moved COM by the turn: Step 7's stage left the
+        load still)."""
         sign = self.probe_sign(k)
         if sign:
-            return (sign * self.push[0], sign * self.push[1])
+            keep = self._keep_turning(k, own)
+            return (sign * self.push[0] + keep[0], sign * self.push[1] + keep[1])
         v = own.com_velocity or velocity
         b = self.tuning.brake_gain
-        return (-b * v[0], -b * v[1])
+        spin = self._spin_up(k, own)
+        return (-b * v[0] + spin[0], -b * v[1] + spin[1])
 
 
 def _changed(k: int, own: OwnEstimates) -> bool:

@@ -323,7 +323,11 @@ def test_the_robust_push_damps_the_centroids_velocity_and_says_by_how_much():
     tick), to the common force, and the pipeline's fits are told what was added, tick by
     tick."""
     m = machine(
-        estimator=Estimators.ROBUST, push_force=2.0, push_damping=2.0, push_direction=(0.0, 1.0)
+        estimator=Estimators.ROBUST,
+        push_force=2.0,
+        push_damping=2.0,
+        push_direction=(0.0, 1.0),
+        spin_up_s=0.0,  # the push's stage for Step 5 at once
     )
     own = Own(moment=1.0, omega=0.5, centroid=(0.4, 0.0), instant=49, velocity=(0.1, 0.2))
     enter(m, Phase.PUSH, 50, own)

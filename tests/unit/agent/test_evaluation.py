@@ -22,7 +22,7 @@ from agent.platform.evaluation import (
     scalar_interval,
     team_errors,
 )
-from agent.platform.protocol import Estimates, Phase, Truth
+from agent.platform.protocol import GRAVITY, Estimates, Phase, Truth
 
 # Three contacts around a COM at the origin: p_G = (0, 1/3), z_C = p_G − p_C = (0, 1/3).
 CONTACTS = ((-1.0, 0.0), (1.0, 0.0), (0.0, 1.0))
@@ -38,7 +38,11 @@ TRUTH = Truth(
     contact_to_com=tuple((-x, -y) for x, y in CONTACTS),
     mass=4.0,
     moment=2.0,
+    ground_coulomb=0.02,
+    ground_static=0.03,
+    friction_radius=0.5,
 )
+"""On a floor of μ = 2 %: a spin meets the friction torque μ m g c = 0.3924 N m."""
 GRAPH = {1: (2,), 2: (1, 3), 3: (2,)}
 
 
@@ -56,6 +60,8 @@ def estimates(robot: int, **changes) -> Estimates:
         "centroid_offset": (x, y - 1 / 3),
         "com_offset": (0.0, 1 / 3),
         "com_observer": (0.0, 1 / 3),
+        "friction_torque": 0.02 * 4.0 * GRAVITY * 0.5,
+        "coulomb": 0.02,
     }
     return Estimates(robot=robot, tick=100, phase=Phase.DONE, **{**exact, **changes})
 
@@ -71,6 +77,8 @@ def test_errors_are_relative_for_m_and_j_metres_for_offsets_rad_s_for_omega() ->
         centroid_offset=(1.0, -1 / 3 + 0.005),
         com_offset=(0.006, 1 / 3),
         com_observer=(0.0, 1 / 3 - 0.007),
+        friction_torque=0.3924 + 0.01,
+        coulomb=0.025,
     )
     found = robot_errors(est, TRUTH, GRAPH[2])
     assert tuple(found) == ERROR_KEYS
@@ -84,6 +92,8 @@ def test_errors_are_relative_for_m_and_j_metres_for_offsets_rad_s_for_omega() ->
             "com_offset_m": 0.006,
             "com_observer_m": 0.007,
             "omega_rad_s": 0.05,
+            "friction_torque_nm": 0.01,
+            "coulomb": 0.005,
         }
     )
     exact = robot_errors(estimates(2), TRUTH, GRAPH[2])

@@ -621,7 +621,7 @@ def test_share_flow_count_must_match_its_bytes() -> None:
     rejects(Share, payload[:-1])  # a flow cut short
 
 
-ESTIMATES_FIXED = struct.Struct("<HqBqHBBBBHH")
+ESTIMATES_FIXED = struct.Struct("<HqBqIBBBBHH")
 """robot, tick, phase, phase_since, presence bits, neighbours, covariances, started, settled,
 load changes, rejoins."""
 
@@ -666,7 +666,7 @@ def test_estimates_with_no_such_phase_are_refused(phase: int) -> None:
     assert "phase" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_FULL, phase=phase)))
 
 
-@pytest.mark.parametrize("present", [1 << 15, 0xFFFF])
+@pytest.mark.parametrize("present", [1 << 19, 0xFFFFFFFF])
 def test_estimates_presence_bits_past_the_fields_are_refused(present: int) -> None:
     assert "presence" in str(rejects(Estimates, _estimates_fixed(ESTIMATES_EMPTY, present=present)))
 

@@ -409,8 +409,8 @@ def test_mass_fit_with_a_reversing_push_and_lagging_drives(lag: float) -> None:
         offset = rotate(offset0, angle)
         contact = (velocity[0] - 0.8 * offset[1], velocity[1] + 0.8 * offset[0])
         for fit in fits.values():
-            sign = commanded[k - 1] if k else 1.0
-            fit.update(contact, offset, angle, sign, DT, com_velocity=tuple(velocity))
+            before = commanded[k - 1] if k else 1.0
+            fit.update(contact, offset, angle, before, DT, com_velocity=tuple(velocity))
         velocity[1] += n * force[1] * level / mass * DT
         travel = max(travel, abs(velocity[1] - v0[1]))
     assert travel < n * force[1] * 1.0 / mass  # the speed swings by at most n f T / 2m each way
@@ -453,9 +453,9 @@ def test_mass_and_com_fits_take_a_damped_push() -> None:
         # ṗ_G = ṗ_C + ω Q z_C, as every robot estimates it from Step 2 (here exactly)
         zc = rotate(c, theta)
         added = (-b * (velocity[0] - omega * zc[1]), -b * (velocity[1] + omega * zc[0]))
-        sign = commanded[k - 1] if k else 1.0
+        before = commanded[k - 1] if k else 1.0
         mass_fit.update(
-            contact, offset, theta, sign, DT, added=previous, com_velocity=tuple(velocity)
+            contact, offset, theta, before, DT, added=previous, com_velocity=tuple(velocity)
         )
         if k:
             com_fit.update(theta, commanded[k - 1], DT, added=previous)

@@ -3,12 +3,15 @@ the subject of a future work"). These end-to-end runs hold the paper's scenario 
 odometry noise of 1 cm/s and force noise of 0.5 N, run with ``[agent] estimator = "robust"``
 and Step 1 spun up to 1 m/s, to the bounds of the noise issue: within 1.5 times a centralized
 batch fit of the same kind of data (m 0.44 %, J 1.2 %, ``contact_to_com`` 12 mm, the issue's
-reference figures), with margin, and done within 20 s simulated; ``z_ij`` within 10 mm (the
+reference figures), with margin, and done within 30 s simulated (the real floor's issue: the
+robust push runs in stages, Step 5's, then Step 7's); ``z_ij`` within 10 mm (the
 issue's 1.5 × 2.1 mm is not reached yet). The paper's estimators, on the same runs, do not get
 past Step 1.
 
 The robust estimators also keep the noise-free results: within a few times today's paper
-figures (m 0.0003 %, J 0.013 %, 0.15 mm)."""
+figures (m 0.0003 %, J 0.013 %, 0.15 mm), but for ``contact_to_com`` and ``z_ij``, within
+1.5 mm: Step 7's stage stops the load's turn, and the team's tracked angle loses about
+0.5 mrad while it does (1 mm at the contacts' 2 m)."""
 
 from __future__ import annotations
 
@@ -31,7 +34,7 @@ SIGMA_V = 0.01  # m/s per axis
 SIGMA_F = 0.5  # N per axis
 
 
-def _scenario(seed: int, estimator: Estimators, noise: bool = True, max_time_s: float = 20.0):
+def _scenario(seed: int, estimator: Estimators, noise: bool = True, max_time_s: float = 30.0):
     paper = load_scenario(PAPER)
     return dataclasses.replace(
         paper,
@@ -106,8 +109,8 @@ def test_the_robust_estimators_without_noise() -> None:
     worst = worst_errors(outcome)
     assert worst["mass"] <= 2e-4, worst
     assert worst["moment"] <= 3e-4, worst
-    assert worst["contact_to_com"] <= 1e-3, worst
-    assert worst["relative"] <= 1e-3, worst
+    assert worst["contact_to_com"] <= 1.5e-3, worst
+    assert worst["relative"] <= 1.5e-3, worst
 
 
 def test_a_scenario_without_an_agent_table_works_with_real_sensors_and_drives(
@@ -115,7 +118,7 @@ def test_a_scenario_without_an_agent_table_works_with_real_sensors_and_drives(
 ) -> None:
     """The defaults are for real robots: the paper's load with the sensors' noise and the
     drives of ``paper-noisy.toml`` (1 cm/s, 0.5 N, a 20 ms lag, 2 % gain errors) and no
-    ``[agent]`` table, run by ``heft run``, is done within 20 s simulated and on its floor;
+    ``[agent]`` table, run by ``heft run``, is done within 30 s simulated and on its floor;
     every robot's m, J and ``contact_to_com`` hold the truth within their published 95 %
     intervals, and its ``z_ij`` are within 1 cm."""
     text = (PAPER.parent / "paper-noisy.toml").read_text(encoding="utf-8")
@@ -127,7 +130,7 @@ def test_a_scenario_without_an_agent_table_works_with_real_sensors_and_drives(
     assert main(["run", str(path), "--out", str(out)]) == 0
     capsys.readouterr()
     results = json.loads(out.read_text(encoding="utf-8"))
-    assert results["converged"] and results["sim_time_s"] <= 20.0, results["sim_time_s"]
+    assert results["converged"] and results["sim_time_s"] <= 30.0, results["sim_time_s"]
     assert results["floor"]["within"], results["floor"]
     for robot, rows in results["intervals"].items():
         for name in ("mass", "moment", "contact_to_com"):
