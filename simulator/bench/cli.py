@@ -5,8 +5,10 @@
     heft bench generated [-n/--count N]
     heft bench zenoh [--sizes 4,8,16]
     heft bench noise [SCENARIO] [--seeds N] [--first-seed S] [--generated N] [--ideal-drives]
-    heft bench sweep [SCENARIO] [--seeds N] [--first-seed S] [--generated N] [--ideal-drives]
-                     [--plot DIR]
+                     [--coulomb MU | --coulomb-range LO HI] [--static MU_S]
+    heft bench sweep [...as noise...] [--plot DIR]
+    heft bench friction [SCENARIO] [--seeds N] [--first-seed S] [--generated N]
+                        [--ideal-drives] [--plot FILE]
     heft bench changes [SCENARIO] [--seeds N] [--first-seed S]
     heft bench calibrate published-variance|direction-variance|correlation-time [--seeds N]
                          [--first-seed S] [--ideal-drives]
@@ -14,10 +16,11 @@
 
 Each runs in this process (``zenoh``: as processes on 127.0.0.1) and prints its report on
 standard output, its progress on stderr. ``accuracy`` (the robust estimators' speed against
-the paper's), ``generated``, ``noise`` and ``changes`` check goals (their modules' ``GOALS``):
-each goal's figure and verdict are printed last, and the exit status is 0 when every one is
-met, 1 when one is not. ``zenoh`` and ``sweep`` report figures and check none: 0 once they
-ran; so does ``calibrate`` (:mod:`simulator.bench.calibrate`), which registers its own parser.
+the paper's), ``generated``, ``noise``, ``friction`` and ``changes`` check goals (their
+modules' ``GOALS``): each goal's figure and verdict are printed last, and the exit status is 0
+when every one is met, 1 when one is not. ``zenoh`` and ``sweep`` report figures and check
+none: 0 once they ran; so does ``calibrate`` (:mod:`simulator.bench.calibrate`), which
+registers its own parser.
 
 Building the parsers imports nothing heavy (no pymunk, numpy or matplotlib): the handlers
 import what they run.
@@ -37,16 +40,21 @@ from agent.platform.config import Bound
 from agent.platform.goals import conclude
 from simulator.bench import calibrate
 from simulator.cli import load_scenario_argument
-from simulator.scenario import PAPER_SCENARIO
+from simulator.scenario import MAX_FRICTION, PAPER_SCENARIO
 
 if TYPE_CHECKING:
+    from simulator.bench.floor import FloorSettings
     from simulator.bench.noise import NoiseSettings
     from simulator.inprocess import RunOutcome
     from simulator.scenario import Scenario
 
 NOISE_SEEDS = 20
-"""Seeds of ``noise``, ``sweep`` and ``changes`` when not told (that of
+"""Seeds of ``noise``, ``sweep``, ``friction`` and ``changes`` when not told (that of
 :class:`simulator.bench.noise.NoiseSettings`)."""
+PAPER_FLOOR_SCENARIO = PAPER_SCENARIO.with_name("paper-floor.toml")
+"""The paper's load on four casters, ``heft bench friction``'s load when not told."""
+FRICTION_BOUND = Bound(0, MAX_FRICTION)
+"""The range of ``--coulomb``, ``--coulomb-range`` and ``--static``: the scenario's."""
 
 
 def register(benchmarks: argparse._SubParsersAction) -> None:
@@ -68,13 +76,17 @@ def _say_run(label: str, outcome: RunOutcome) -> None:
     )
 
 
-def _scenario_argument(parser: argparse.ArgumentParser | argparse._MutuallyExclusiveGroup):
+def _scenario_argument(
+    parser: argparse.ArgumentParser | argparse._MutuallyExclusiveGroup,
+    default: Path = PAPER_SCENARIO,
+    what: str = "the paper's",
+):
     parser.add_argument(
         "scenario",
         metavar="SCENARIO",
         nargs="?",
-        default=str(PAPER_SCENARIO),
-        help="scenario TOML file (default: the paper's, simulator/scenarios/paper.toml)",
+        default=str(default),
+        help=f"scenario TOML file (default: {what}, simulator/scenarios/{default.name})",
     )
 
 
@@ -256,7 +268,39 @@ def _noisy_runs(
         )
     if args.ideal_drives:
         settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
+    floor = floor_settings(args)
+    if floor is not None:
+        settings = dataclasses.replace(settings, floor=floor)
     return scenarios, label, settings
+
+
+def floor_settings(args: argparse.Namespace) -> FloorSettings | None:
+    """``--coulomb MU`` or ``--coulomb-range LO HI``, with ``--static MU_S``, range-checked;
+    None without them (each scenario's own floor)."""
+    coulomb = getattr(args, "coulomb", None)
+    span = getattr(args, "coulomb_range", None)
+    static = getattr(args, "static", None)
+    if coulomb is None and span is None:
+        if static is not None:
+            raise UsageError("--static: needs --coulomb or --coulomb-range")
+        return None
+    if coulomb is not None:
+        FRICTION_BOUND.check("--coulomb", coulomb)
+        span = (coulomb, coulomb)
+    else:
+        low, high = span
+        FRICTION_BOUND.check("--coulomb-range LO", low)
+        if not FRICTION_BOUND.contains(high, low=low):
+            raise UsageError(
+                FRICTION_BOUND.message("--coulomb-range HI", high, low, " (at least LO)")
+            )
+    if static is not None and not FRICTION_BOUND.contains(static, low=span[1]):
+        raise UsageError(
+            FRICTION_BOUND.message("--static", static, span[1], " (at least the largest mu)")
+        )
+    from simulator.bench.floor import FloorSettings
+
+    return FloorSettings(tuple(span), static)
 
 
 def cmd_noise(args: argparse.Namespace) -> int:
@@ -295,10 +339,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_noise_options(parser: argparse.ArgumentParser) -> None:
-    """SCENARIO or ``--generated``, ``--seeds``, ``--first-seed``, ``--ideal-drives``."""
+def _add_noise_options(
+    parser: argparse.ArgumentParser, default: Path = PAPER_SCENARIO, what: str = "the paper's"
+) -> None:
+    """SCENARIO (``default``, ``what`` it is) or ``--generated``, ``--seeds``,
+    ``--first-seed``, ``--ideal-drives``."""
     which = parser.add_mutually_exclusive_group()
-    _scenario_argument(which)
+    _scenario_argument(which, default, what)
     which.add_argument(
         "--generated",
         metavar="N",
@@ -311,6 +358,32 @@ def _add_noise_options(parser: argparse.ArgumentParser) -> None:
         "--ideal-drives",
         action="store_true",
         help="drives that apply exactly what they are commanded (no lag, no gain error)",
+    )
+
+
+def _add_floor_options(parser: argparse.ArgumentParser) -> None:
+    """``--coulomb MU`` or ``--coulomb-range LO HI``, and ``--static MU_S``."""
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument(
+        "--coulomb",
+        metavar="MU",
+        type=float,
+        help="on a floor of kinetic friction MU (a fraction of the weight, in"
+        f" {FRICTION_BOUND.text()}): SCENARIO's own supports if it has a [ground] table, else"
+        " the load's whole area (the cells that bear it, if the floor would pull at others)",
+    )
+    which.add_argument(
+        "--coulomb-range",
+        metavar=("LO", "HI"),
+        nargs=2,
+        type=float,
+        help="the same with each seed's MU drawn uniformly in [LO, HI] (its own seeded stream)",
+    )
+    parser.add_argument(
+        "--static",
+        metavar="MU_S",
+        type=float,
+        help=f"the breakaway friction, at least MU (default: 1.5 MU, at most {MAX_FRICTION:g})",
     )
 
 
@@ -339,16 +412,19 @@ def _add_noise(benchmarks: argparse._SubParsersAction) -> None:
         description=(
             "The robust estimators, the paper's and the centralized batch fit (heft baseline)\n"
             "on the same runs at 1 cm/s and 0.5 N of sensor noise with lagging drives of 2 %\n"
-            "gain error, over --seeds seeds of SCENARIO (or of the generated scenarios):\n"
-            "median errors, ratios to the fit, runs done within 20 s, how often the truth is\n"
-            "inside the published 95 % intervals.\n\n"
-            "Goals: each median within 1.5x the fit's, every robust run done within 20 s and\n"
-            "on its floor, the 95 % intervals holding the truth 90-99 % of the time.\n\n"
+            "gain error, over --seeds seeds of SCENARIO (or of the generated scenarios), on a\n"
+            "floor of friction with --coulomb or --coulomb-range (else SCENARIO's own): median\n"
+            "errors, ratios to the fit (which fits no friction), runs done within 30 s, how\n"
+            "often the truth is inside the published 95 % intervals (friction's included).\n\n"
+            "Goals: the medians of m, J, contact_to_com and z_ij within 1.5x the fit's, each\n"
+            "quantity's 95 % intervals holding the truth 90-99 % of the time, at least 95 % of\n"
+            "the robust runs done within 30 s simulated, every one on its floor.\n\n"
             "Exit status: 0 every goal met, 1 one not met, 2 bad scenario or arguments,\n"
             "130 interrupted."
         ),
     )
     _add_noise_options(parser)
+    _add_floor_options(parser)
     parser.set_defaults(handler=cmd_noise)
 
 
@@ -365,12 +441,69 @@ def _add_sweep(benchmarks: argparse._SubParsersAction) -> None:
         ),
     )
     _add_noise_options(parser)
+    _add_floor_options(parser)
     parser.add_argument(
         "--plot",
         metavar="DIR",
         help="write noise_sweep.png (error against sigma_v) into DIR, created if needed",
     )
     parser.set_defaults(handler=cmd_sweep)
+
+
+# ------------------------------------------------------------------------------ friction
+def cmd_friction(args: argparse.Namespace) -> int:
+    """``heft bench friction``: the robust runs over the floor's friction, a table (and a
+    plot)."""
+    if args.plot is not None:
+        check_writable(Path(args.plot))
+    scenarios, label, settings = _noisy_runs(args)
+    from simulator.bench.friction import (
+        GOALS,
+        figures,
+        format_friction_sweep,
+        plot_friction_sweep,
+        run_friction_sweep,
+    )
+    from simulator.bench.noise import timed
+
+    def on_level(mu: float, results) -> None:
+        print(f"{PROG}: mu {100 * mu:g} % done", file=sys.stderr, flush=True)
+
+    found, wall = timed(run_friction_sweep, scenarios, settings, on_level)
+    print(format_friction_sweep(found, f"{label}, {settings.noise_text}"))
+    print(f"\n({wall:.0f} s wall)")
+    if args.plot is not None:
+        print(f"plot: {plot_friction_sweep(found, Path(args.plot), label)}")
+    return conclude(GOALS, figures(found))
+
+
+def _add_friction(benchmarks: argparse._SubParsersAction) -> None:
+    parser = benchmarks.add_parser(
+        "friction",
+        help="the noise benchmark over the floor's friction: a table, a plot",
+        formatter_class=HelpFormatter,
+        description=(
+            "The robust estimators and the centralized fit on the noise benchmark's runs (1 cm/s,\n"
+            "0.5 N, lagging drives of 2 % gain error) on floors of kinetic friction mu = 0, 0.5,\n"
+            "1, 2, 3 and 5 % of the weight (breakaway 1.5 mu; 0: frictionless), over --seeds\n"
+            "seeds of SCENARIO (its own supports: by default the paper's load on four casters)\n"
+            "or of the generated scenarios (on their area): per mu a markdown table of the\n"
+            "medians of m, J, contact_to_com and z_ij beside the fit's and their ratios, the\n"
+            "friction estimates' (tau_c relative, mu absolute), how often the truth is inside\n"
+            "the published 95 % intervals, runs done within 30 s and when, runs on their floor.\n\n"
+            "Goals: m's median within 1.5x the fit's at every mu; no quantity's 95 % intervals\n"
+            "holding the truth less than 90 % of the time at any mu.\n\n"
+            "Exit status: 0 every goal met, 1 one not met, 2 bad scenario or arguments,\n"
+            "130 interrupted."
+        ),
+    )
+    _add_noise_options(parser, PAPER_FLOOR_SCENARIO, "the paper's load on four casters")
+    parser.add_argument(
+        "--plot",
+        metavar="FILE",
+        help="write the medians against mu into FILE (PNG), its folder created if needed",
+    )
+    parser.set_defaults(handler=cmd_friction)
 
 
 # ------------------------------------------------------------------------------ changes
@@ -423,6 +556,7 @@ PARSERS: tuple[Callable[[argparse._SubParsersAction], None], ...] = (
     _add_zenoh,
     _add_noise,
     _add_sweep,
+    _add_friction,
     _add_changes,
     calibrate.add_parser,
 )
