@@ -153,11 +153,23 @@ def published_variance(results: Sequence) -> list[Factor]:
         for s in found.get("relative_positions", []):
             d2 = distance2(s.error, s.covariance) * factors["relative"]
             edges.append(((result.seed, s.robot), planar_factor(0.0, d2)))
+    friction = {
+        key: tuple(
+            scalar_factor(s.error[0], s.covariance[0] / factors[key]) for s in found_all(key)
+        )
+        for key in ("friction_torque", "coulomb")
+        for found_all in [lambda k: [s for r in results for s in r.intervals.get(k, [])]]
+    }
     return [
         Factor("m (the team's, published unscaled)", 1.0, tuple(mass)),
         Factor('J ("moment")', factors["moment"], tuple(moment)),
         Factor('contact_to_com ("contact_to_com")', factors["contact_to_com"], tuple(offset)),
         *_edge_rows('z_ij ("relative")', factors["relative"], edges),
+        *(
+            Factor(f'{name} ("{key}")', factors[key], friction[key])
+            for name, key in (("tau_c", "friction_torque"), ("mu", "coulomb"))
+            if friction[key]
+        ),
     ]
 
 
@@ -334,13 +346,18 @@ CALIBRATIONS = (
 
 
 def command(
-    calibration: Calibration, first_seed: int | None, seeds: int, ideal_drives: bool = False
+    calibration: Calibration,
+    first_seed: int | None,
+    seeds: int,
+    ideal_drives: bool = False,
+    coulomb: tuple[float, float] | None = None,
 ) -> str:
     """The command line that reproduces a calibration."""
     line = f"{PROG} bench calibrate {calibration.name}"
     if first_seed is not None:
         line += f" --first-seed {first_seed}"
-    return f"{line} --seeds {seeds}" + (" --ideal-drives" if ideal_drives else "")
+    line += f" --seeds {seeds}" + (" --ideal-drives" if ideal_drives else "")
+    return line + ("" if coulomb is None else f" --coulomb-range {coulomb[0]:g} {coulomb[1]:g}")
 
 
 def seed_range(first: int, count: int) -> str:
@@ -402,14 +419,22 @@ def format_arc_ratios(ratios: dict[tuple[float, float], float]) -> list[str]:
 
 
 # ------------------------------------------------------------------------------ the commands
-def _run_noise(first_seed: int, seeds: int, ideal_drives: bool) -> tuple[str, list]:
-    """The noise benchmark's runs of the seeds (with ideal drives if told), and what they
-    were run on."""
+def _run_noise(
+    first_seed: int, seeds: int, ideal_drives: bool, coulomb: tuple[float, float] | None = None
+) -> tuple[str, list]:
+    """The noise benchmark's runs of the seeds (with ideal drives if told; on the paper's load
+    on four casters, ``paper-floor.toml``'s, each seed's ``μ`` drawn from ``coulomb`` if
+    given), and what they were run on."""
+    from simulator.bench.floor import FloorSettings
     from simulator.bench.noise import NoiseSettings, run_noise_bench, say_seed, timed
     from simulator.scenario import PAPER_SCENARIO, load_scenario
 
-    scenario = load_scenario(PAPER_SCENARIO)
-    settings = dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first_seed)
+    if coulomb is None:
+        scenario, floor = load_scenario(PAPER_SCENARIO), None
+    else:
+        floor = FloorSettings(coulomb)
+        scenario = load_scenario(PAPER_SCENARIO.parent / "paper-floor.toml")
+    settings = dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first_seed, floor=floor)
     if ideal_drives:
         settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
 
@@ -443,12 +468,18 @@ def run(calibration: Calibration, args: argparse.Namespace) -> int:
     Bound(1, 1000, "seeds").check("--seeds", args.seeds)
     first_seed = getattr(args, "first_seed", None)
     ideal = getattr(args, "ideal_drives", False)
+    coulomb = None
     if calibration.first_seed is None:
         setting, found = _run_arcs(args.seeds)
     else:
         Bound(0, 100_000, "seeds").check("--first-seed", first_seed)
-        setting, found = _run_noise(first_seed, args.seeds, ideal)
-    print(command(calibration, first_seed, args.seeds, ideal))
+        coulomb = getattr(args, "coulomb_range", None)
+        if coulomb is not None:
+            Bound(0, 0.5, "").check("--coulomb-range", coulomb[0])
+            Bound(coulomb[0], 0.5, "").check("--coulomb-range", coulomb[1])
+            coulomb = (coulomb[0], coulomb[1])
+        setting, found = _run_noise(first_seed, args.seeds, ideal, coulomb)
+    print(command(calibration, first_seed, args.seeds, ideal, coulomb))
     notes = calibration.notes(found)
     print(format_report(calibration, setting, calibration.factors(found), notes))
     return 0
@@ -492,6 +523,14 @@ def add_parser(benchmarks: argparse._SubParsersAction) -> None:
                 action="store_true",
                 help="drives that apply exactly what they are commanded (no lag, no gain"
                 " error) instead of the benchmark's",
+            )
+            sub.add_argument(
+                "--coulomb-range",
+                type=float,
+                nargs=2,
+                metavar=("LO", "HI"),
+                help="on a real floor: the paper's load on four casters (paper-floor.toml's),"
+                " each seed's kinetic friction drawn in [LO, HI] (default: frictionless)",
             )
         sub.add_argument(
             "--seeds",

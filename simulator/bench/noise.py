@@ -342,11 +342,21 @@ def baseline_friction(found: BaselineFit | None) -> dict[str, float | None]:
 def published(sample: Sample, shares: dict[int, FitShares]) -> dict[str, list[Interval]]:
     """Every robot's estimates in ``sample`` that it published an uncertainty for, beside the
     truth then (:class:`Interval`): ``mass`` (the team's), ``moment``, ``contact_to_com``, one
-    ``relative_positions`` per edge, and ``own_mass`` (the robot's own fit, not published),
+    ``relative_positions`` per edge, ``friction_torque`` and ``coulomb`` (the floor's, against
+    ``μ m g c`` and ``μ``), and ``own_mass`` (the robot's own fit, not published),
     with the shares of their fits (``shares``, per robot) for ``moment`` and ``own_mass``."""
     truth = sample.truth
     found: dict[str, list[Interval]] = {
-        key: [] for key in ("mass", "moment", "contact_to_com", "relative_positions", "own_mass")
+        key: []
+        for key in (
+            "mass",
+            "moment",
+            "contact_to_com",
+            "relative_positions",
+            "own_mass",
+            "friction_torque",
+            "coulomb",
+        )
     }
     for i, est in sorted(sample.estimates.items()):
         share = shares.get(i, FitShares())
@@ -374,6 +384,12 @@ def published(sample: Sample, shares: dict[int, FitShares]) -> dict[str, list[In
         if share.own_mass is not None:
             mass, std, fit_std = share.own_mass
             found["own_mass"].append(Interval(i, (mass,), (truth.mass,), (std * std,), fit_std))
+        for key, value, std, true in (
+            ("friction_torque", est.friction_torque, est.friction_torque_std, truth.coulomb_torque),
+            ("coulomb", est.coulomb, est.coulomb_std, truth.ground_coulomb),
+        ):
+            if value is not None and std is not None:
+                found[key].append(Interval(i, (value,), (true,), (std * std,)))
     return found
 
 

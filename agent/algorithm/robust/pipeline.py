@@ -398,7 +398,7 @@ class RobustPipeline(EstimationPipeline):
             ("coulomb", self.coulomb),
         ):
             if found is not None:
-                scale = math.sqrt(PUBLISHED_VARIANCE.get(key, 1.0))
+                scale = math.sqrt(PUBLISHED_VARIANCE[key])
                 out[key], out[key + "_std"] = found[0], found[1] * scale
         com_cov = None
         if contact_to_com is not None and edges and self.com is not None:

@@ -138,7 +138,10 @@ def test_one_seed_against_the_centralized_fit() -> None:
     found = result.intervals
     assert len(found["moment"]) == len(found["own_mass"]) == 4
     assert all(s.fit_std is not None and s.fit_std > 0.0 for s in found["moment"])
-    mass, moment, offset, _, robots = published_variance([result])
+    mass, moment, offset, _, robots, *floor = published_variance([result])
+    # the floor's friction, published by every robot (frictionless here: its truth is 0)
+    assert [f.quantity for f in floor] == ['tau_c ("friction_torque")', 'mu ("coulomb")']
+    assert all(len(f.needed) == 4 for f in floor)
     for factor, key in (
         (mass, "mass_rel"),
         (moment, "moment_rel"),
