@@ -414,7 +414,7 @@ def _add_noise(benchmarks: argparse._SubParsersAction) -> None:
             "on the same runs at 1 cm/s and 0.5 N of sensor noise with lagging drives of 2 %\n"
             "gain error, over --seeds seeds of SCENARIO (or of the generated scenarios), on a\n"
             "floor of friction with --coulomb or --coulomb-range (else SCENARIO's own): median\n"
-            "errors, ratios to the fit (which fits no friction), runs done within 30 s, how\n"
+            "errors, ratios to the fit (with the floor's friction), runs done within 30 s, how\n"
             "often the truth is inside the published 95 % intervals (friction's included).\n\n"
             "Goals: the medians of m, J, contact_to_com and z_ij within 1.5x the fit's, each\n"
             "quantity's 95 % intervals holding the truth 90-99 % of the time, at least 95 % of\n"

@@ -637,7 +637,8 @@ def _floor_lines(results: Sequence[SeedResult]) -> list[str]:
     lines = [
         f"floor: mu {100 * min(mus):.3g}-{100 * max(mus):.3g} % (median"
         f" {100 * statistics.median(mus):.3g} %); tau_c's error relative to the truth's"
-        " mu m g c, mu's absolute (in %); the baseline fits no friction",
+        " mu m g c, mu's absolute (in %); the baseline fits the floor's friction too (heft"
+        " baseline), compared here on m, J, contact_to_com and z_ij",
     ]
     if partial:
         lines.append(
