@@ -253,8 +253,12 @@ class PhaseMachine:
         first ``T/2``, then ``−`` and ``+`` for ``T`` each (``T`` = ``push_flip_s``; always
         ``+`` for ``T = 0``), all the other way round if the family's first sign is ``−``
         (:meth:`_first_push_sign`)."""
-        period = self.push_flip_ticks
-        since = tick - self.entered.get(Phase.PUSH, tick)
+        return self._flip_sign(tick - self.entered.get(Phase.PUSH, tick), self.push_flip_ticks)
+
+    def _flip_sign(self, since: int, period: int) -> float:
+        """The sign ``since`` ticks into a push reversed every ``period`` ticks: the family's
+        first sign for ``period/2``, then the other and the first for ``period`` each (always
+        the first for ``period ≤ 0``)."""
         first = self._first_push_sign()
         if period <= 0 or since < period // 2:
             return first

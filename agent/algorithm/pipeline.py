@@ -80,10 +80,10 @@ class EstimationPipeline:
         self.omega: float | None = None
         """``ω`` (Step 3), measured or carried over."""
         self.measured: int | None = None
+        """The last instant whose ω was measured (Steps 4–7 use only those)."""
         self.swung = False
         """Whether the push's stage for Step 5 is over (a family that stages the push: its
         ``ẑ_C`` is then as good as it gets, and counts as settled, with its uncertainty)."""
-        """The last instant whose ω was measured (Steps 4–7 use only those)."""
         self.zdot: dict[int, Vec2] = {}
         """``ż_ij`` at the estimation instant, by neighbour."""
         self.velocity: Vec2 | None = None

@@ -9,8 +9,9 @@
 - *push*: the configured ``push_force``, the same for every robot whatever its Ĵ, plus the
   torque that keeps the load turning against the floor's friction: ``f_i += s_ω (τ̂_c / w)
   z_i⊥`` (eq. 14's form: no net force, torque ``s_ω τ̂_c``, ``τ̂_c`` Step 4's estimate when
-  the push began), so that Steps 5 and 7 see a load that turns fast compared with its COM's
-  speed, where their friction model holds (docs/estimator.md, "Friction"); with
+  the push began), so that Step 5's stage sees a load that turns fast compared with its COM's
+  speed, where friction is a torque alone to first order (docs/estimator.md, "On a real floor:
+  friction"); the push runs in stages (:meth:`_push_stage`), Step 7's in translation; with
   ``push_damping = b`` each robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity
   at the estimation instant (which every robot estimates alike), so that a light load's speed
   stays within about ``f/b`` and a heavy one's drift dies out (Steps 5 and 7 take the force as
@@ -99,11 +100,7 @@ class RobustPhases(PhaseMachine):
         if stage == 2:
             return super().push_sign(tick - self.translate_from)
         since = tick - self.entered.get(Phase.PUSH, tick) - self.spin_up_ticks
-        period = self.pendulum_flip_ticks
-        first = self._first_push_sign()
-        if since < period // 2:
-            return first
-        return -first if (since - period // 2) // period % 2 == 0 else first
+        return self._flip_sign(since, self.pendulum_flip_ticks)
 
     def _push_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         """Each stage's law: the swinging push (with the torque against friction), the brake,

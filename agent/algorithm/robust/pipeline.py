@@ -70,6 +70,8 @@ class RobustPipeline(EstimationPipeline):
         """Once done, the current probe's fits (:mod:`agent.algorithm.robust.load_change`)."""
         self.probe_began = -1
         """The first tick of :attr:`probe`'s probe."""
+        self._turns: deque[tuple[float, float]] = deque()
+        """``(t, θ)`` over Step 4's last :data:`STUCK_FLIPS` flips (is the load stuck?)."""
 
     # ---------------------------------------------------------------- the drives' gains
     @property
@@ -205,7 +207,7 @@ class RobustPipeline(EstimationPipeline):
         # the rotation angle, not ω; friction's torque against the turn
         fit = self.inertia
         if not fit.started:
-            self._turns = deque()
+            self._turns.clear()
         fit.update(self.angle, torque, span, spin=self._spin)
         # held by the floor: turned less than STUCK_TURN over the last STUCK_FLIPS flips
         window, turns = STUCK_FLIPS * self.tuning.robust.inertia_flip_s, self._turns
