@@ -163,6 +163,12 @@ class RunEnd:
         phase = min(robot.phase for robot in team)
         if all(getattr(robot, "stuck", False) for robot in team):
             torque = max(getattr(robot, "stuck_torque", 0.0) for robot in team)
+            because = next((b for robot in team if (b := getattr(robot, "held_because", ""))), "")
+            if because:
+                return Verdict(
+                    CANNOT_BREAK_AWAY,
+                    f"{because}, at t = {tick * self.period_s:.2f} s simulated: the floor holds it",
+                )
             return Verdict(
                 CANNOT_BREAK_AWAY,
                 f"Step 4's torque of {torque:.3g} N m left the load where it was at"

@@ -71,9 +71,14 @@ class Agent:
 
     @property
     def stuck(self) -> bool:
-        """Whether this robot found the load held by the floor (Step 4's torque did not turn
-        it)."""
-        return self.pipeline.stuck
+        """Whether this robot found the load held by the floor (Step 1's kick at ``max_force``
+        did not move it, or Step 4's torque did not turn it)."""
+        return self.pipeline.stuck or self.phase_machine.held
+
+    @property
+    def held_because(self) -> str:
+        """Why the floor holds the load beyond the team's forces ("" unless it does)."""
+        return self.phase_machine.held_because
 
     @property
     def stuck_torque(self) -> float:

@@ -48,6 +48,11 @@ class OwnEstimates(Protocol):
         ...
 
     @property
+    def mean_spin_torque(self) -> float:
+        """The team's mean torque about the centroid in Step 1's spin-up (N m), by consensus."""
+        ...
+
+    @property
     def moment(self) -> float | None:
         """``Ĵ`` (Step 4)."""
         ...
@@ -74,6 +79,11 @@ class Schedule(Protocol):
     """The ``Ĵ`` the push force was sized with."""
     inertia_torque: float
     """Step 4's torque ``sign(ω) k w`` while speeding up (N m)."""
+    held: bool
+    """Whether the floor holds the load beyond what the team's forces can move (robust)."""
+    spin_torque: float
+    """This robot's torque ``z_i × f_i`` about the centroid in Step 1's spin-up, filtered
+    (N m; robust family, else 0)."""
 
     @property
     def phase(self) -> Phase:

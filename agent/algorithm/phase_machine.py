@@ -70,6 +70,12 @@ class PhaseMachine:
     """One robot's phase, when it was entered, and the force law of each phase (the part every
     family shares; a family overrides the hooks at the end)."""
 
+    held = False
+    """Whether the floor holds the load beyond what the team's forces can move (a family that
+    tells): the robot pushes no more."""
+    held_because = ""
+    """Why, for the run's verdict."""
+
     def __init__(self, config: AgentConfig, barrier: PhaseBarrier | None = None):
         tuning = config.tuning
         self.tuning = tuning
@@ -83,6 +89,8 @@ class PhaseMachine:
         """The tick at which each phase was entered (phases skipped are not listed)."""
         self.kick_ticks = round(tuning.kick_duration_s / self.dt)
         self.kick = kick_force(config.seed, config.robot, tuning.kick_force)
+        self.spin_torque = 0.0
+        """N m: this robot's filtered torque in Step 1's spin-up (a family may measure it)."""
         self.inertia_min_ticks = round(tuning.inertia_min_s / self.dt)
         self.spin_sign = 0.0
         """``sign(ω)`` when the inertia phase began: the torque first speeds that turn up."""
@@ -157,7 +165,7 @@ class PhaseMachine:
         self.entered[phase] = k
         if phase == Phase.INERTIA:
             w = self.n * own.mean_square_offset
-            self.inertia_gain = self.tuning.inertia_force / math.sqrt(w)
+            self.inertia_gain = self._inertia_size(own) / math.sqrt(w)
             self.spin_sign = math.copysign(1.0, own.omega or 1.0)
             self.inertia_torque = self.spin_sign * self.inertia_gain * w
         elif phase == Phase.PUSH:
@@ -190,6 +198,8 @@ class PhaseMachine:
     def force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
         """The force to apply during tick ``k``, given the contact's velocity ``ṗ_Ci`` measured
         at ``t_k``, bounded by ``max_force``."""
+        if self.held:
+            return (0.0, 0.0)
         return saturate(self._law(k, own, velocity), self.tuning.max_force)
 
     # ---------------------------------------------------------------- each phase's laws
@@ -306,6 +316,10 @@ class PhaseMachine:
     def _push_magnitude(self, moment: float) -> float:
         """The common force's size (N) for the push, given ``Ĵ`` (before ``max_force``)."""
         raise NotImplementedError
+
+    def _inertia_size(self, own: OwnEstimates) -> float:
+        """``F`` of eq. (14)'s gain ``k = F/√w`` (N): ``inertia_force``."""
+        return self.tuning.inertia_force
 
     def _pushing(self, k: int, own: OwnEstimates, velocity: Vec2, push: Vec2) -> Vec2:
         """The force of tick ``k`` of the push, given the common force ``push`` with its sign."""

@@ -120,6 +120,12 @@ class EstimationPipeline:
         return self.consensus["mean_square_offset"]
 
     @property
+    def mean_spin_torque(self) -> float:
+        """The team's mean torque about the centroid in Step 1's spin-up (N m; 0 for a family
+        that does not measure it)."""
+        return self.consensus["mean_spin_torque"]
+
+    @property
     def moment(self) -> float | None:
         """``Ĵ`` (Step 4)."""
         return None if self.inertia is None else self.inertia.estimate
@@ -193,7 +199,7 @@ class EstimationPipeline:
             turn = (self.omega or 0.0) * interval
         self.angle += turn
         self._angle_at[e] = self.angle
-        self._before_consensus()
+        self._before_consensus(schedule)
         self.consensus.update(turn, inbox.latest, self)  # Step 2
         if schedule.phase == Phase.EXCITE:  # later, Steps 1-3 are done: nothing reads these
             self._track_excite_settling(e)
@@ -389,7 +395,7 @@ class EstimationPipeline:
             settled=self.settle.first_settled(),
             load_changes=schedule.load_changes,
             change_score=self.change_score,
-            stuck_torque=abs(schedule.inertia_torque) if self.stuck else None,
+            stuck_torque=abs(schedule.inertia_torque) if self.stuck or schedule.held else None,
             **self._reported(relative, contact_to_com),
         )
 
@@ -418,7 +424,7 @@ class EstimationPipeline:
         (:class:`~agent.algorithm.estimation.team_consensus.TeamConsensus`)."""
         raise NotImplementedError
 
-    def _before_consensus(self) -> None:
+    def _before_consensus(self, schedule: Schedule) -> None:
         """Anything the consensus' inputs need at this instant."""
 
     def _excite_stds(self) -> tuple[float | None, float | None]:

@@ -156,8 +156,10 @@ class Estimates:
     ``friction_torque`` (N m) is the floor's friction torque about the COM while the load turns
     and ``coulomb`` its kinetic friction coefficient ``μ`` (the force ``−μ m g`` against the COM's
     motion while the load translates), each with its standard deviation (docs/estimator.md,
-    "Friction"). ``stuck_torque`` (N m), when given, is the torque the team applied in Step 4
-    without turning the load: the floor holds it, and the robot estimates nothing more.
+    "Friction"). ``stuck_torque`` (N m), when given, says the floor holds the load and the robot
+    estimates nothing more: the torque the team applied in Step 4 without turning it, the most
+    it could apply within ``max_force`` where that falls short of what the floor's friction
+    torque asks (robust Step 4), or 0 where Step 1's kick at ``max_force`` did not move it.
 
     ``load_changes`` counts the team's restarts at Step 4 for a changed load and ``rejoins`` its
     new beginnings from Step 1 after a halt (:mod:`agent.algorithm.coordination`);
@@ -521,7 +523,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 9
+WIRE_VERSION = 10
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 

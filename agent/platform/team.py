@@ -29,6 +29,8 @@ MAX_DISTANCE = 10_000.0
 """m, a position or offset shared between agents."""
 MAX_FLOW = 1e9
 """What has flowed on an edge of the consensus iterations (m, m² and gains)."""
+MAX_FORCE = 1000.0
+"""N, a force shared between agents (a tuning's ``max_force`` is at most this)."""
 MAX_GAIN = 100.0
 """A drive's gain, or the team's mean gain as a consensus state."""
 MAX_TURN_VARIANCE = 100.0
@@ -143,6 +145,14 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
         MAX_FLOW,
         Averaging.MEAN,
         doc="μ_i → the mean of ι_j m_j: the team's mass is μ / ι",
+    ),
+    TeamQuantity(
+        "mean_spin_torque",
+        1,
+        MAX_FORCE * MAX_DISTANCE,
+        Averaging.MEAN,
+        doc="τ_i → the robots' mean torque about the centroid in Step 1's spin-up (N m,"
+        " robust): n times it is the floor's friction torque once the turn is steady",
     ),
     TeamQuantity(
         "rotation",

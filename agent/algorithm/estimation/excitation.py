@@ -21,9 +21,11 @@ from collections.abc import Iterable
 from agent.platform.geometry import Vec2
 
 
-def kick_force(seed: int, robot: int, magnitude: float) -> Vec2:
-    """The seeded random push of ``robot``: a fixed direction, the given magnitude."""
-    angle = random.Random(seed * 1_000_003 + robot).uniform(-math.pi, math.pi)
+def kick_force(seed: int, robot: int, magnitude: float, attempt: int = 0) -> Vec2:
+    """The seeded random push of ``robot``: a fixed direction, the given magnitude; another
+    direction for each later ``attempt`` (a load the first did not move)."""
+    stream = seed * 1_000_003 + robot if attempt == 0 else f"{seed}/{robot}/{attempt}"
+    angle = random.Random(stream).uniform(-math.pi, math.pi)
     return (magnitude * math.cos(angle), magnitude * math.sin(angle))
 
 

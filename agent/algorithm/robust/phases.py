@@ -1,5 +1,21 @@
 """The robust estimators' force laws where the families differ.
 
+- *excite*: a floor may hold the load against the kick that starts Step 1, and the spin-up
+  (a force in proportion to the contacts' relative velocities) has nothing to work on while the
+  load is still. So the kick goes on for as long as the load does not move, growing (doubling
+  every ``kick_duration_s``, up to ``max_force``) and taking another seeded direction every
+  ``kick_duration_s`` (another wrench), until the robot's contact, or its velocity relative to
+  a neighbour's, filtered over :data:`MOVING_TIME_CONSTANT_S`, is faster than
+  ``breakaway_speed``; the spin-up's gain is then that kick's level ``A_i`` times its setting
+  (``spin_gain A_i / kick_force``), so that it keeps the load turning against the floor, and
+  the kick comes back whenever the load stops. A load that ``max_force``'s kick has not moved
+  within ``breakaway_s`` is held by its floor: the robot stops pushing (:attr:`RobustPhases.
+  held`) and the run ends with "cannot break the load away". Each robot also filters its
+  torque about the centroid in the spin-up, ``τ_i = z_i × f_i``
+  (:attr:`RobustPhases.spin_torque`); the team averages it (``mean_spin_torque``,
+  :mod:`agent.platform.team`), and once Step 1 has settled (a steady turn) ``τ̂₁ = n |τ̄|`` is
+  the floor's friction torque: Step 4's torque and the push's force are sized against it
+  (:meth:`RobustPhases._inertia_size`), rounded up to a step every robot agrees on;
 - *inertia*: the robots' ω differ by their noise, so rather than reverse on ``|ω|`` the torque
   speeds up for ``inertia_flip_s`` and brakes for as long (with ``inertia_brake_level`` of it:
   the floor's friction brakes too), in turn, from the agreed tick on
@@ -31,6 +47,9 @@
 
 from __future__ import annotations
 
+import math
+
+from agent.algorithm.estimation.excitation import kick_force, spin_up_force
 from agent.algorithm.estimation.inertia import inertia_force
 from agent.algorithm.interfaces import OwnEstimates
 from agent.algorithm.phase_machine import Law, PhaseMachine, Ready, _never_ready
@@ -38,6 +57,34 @@ from agent.algorithm.safety import saturate
 from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2, rotate
 from agent.platform.protocol import Phase
+
+MOVING_TIME_CONSTANT_S = 0.1
+"""s: the time constant of the first-order filters of the robot's contact velocity and of its
+relative velocities that tell whether the load moves (Step 1's kick): with ``σ_v`` = 1 cm/s
+per sample at 100 Hz, a relative velocity's filtered noise is about 0.3 cm/s a component,
+a sixteenth of the default ``breakaway_speed``."""
+SPIN_TORQUE_TIME_CONSTANT_S = 1.0
+"""s: the time constant of the first-order filter of the robot's torque ``z_i × f_i`` in Step
+1's spin-up (:attr:`RobustPhases.spin_torque`): Step 1 ends once the turn has been steady for
+``settle_window_s``, when the team's torque is the floor's friction torque."""
+INERTIA_FRICTION_MARGIN = 4.0
+"""Step 4's torque is at least this many times the friction torque that Step 1's spin-up met:
+speeding up, ``T − τ_c``, and braking at ``inertia_brake_level`` = 0.5, ``T/2 + τ_c``, are then
+equal, and the turn neither dies nor grows from flip to flip."""
+LEAST_FRICTION_MARGIN = 2.5
+"""Step 4's torque within ``max_force`` at least this many times ``τ̂₁``, or the team stops
+with the verdict that it cannot break the load away: braking, the floor and the brake together
+would stop the turn at every flip, and the load would stick and slip, which Step 4's fit does
+not model (``pallet.toml``: 86 N m against 41 N m gave m 11 % off and the load off its
+floor)."""
+PUSH_FRICTION_MARGIN = 3.0
+"""The push's common force makes the team's ``n f`` at least this many times the floor's
+friction force, taken as ``τ̂₁ / r`` with ``r = √(w/n)`` the contacts' root-mean-square
+distance from their centroid (the supports' friction radius ``c`` is less for a load pushed at
+its rim): the translation of Step 7's stage then slides the load, with a speed that grows."""
+LEVELS_PER_DOUBLING = 4
+"""Step 4's ``F`` and the push's ``f`` are their settings times ``2^(q/4)``: the robots'
+consensus on ``τ̄`` agrees to far better than that step, so every robot takes the same."""
 
 
 class RobustPhases(PhaseMachine):
@@ -61,7 +108,113 @@ class RobustPhases(PhaseMachine):
         self.gap_ticks = max(1, round(robust.monitor_gap_s / dt))
         self.monitor_ticks = self.gap_ticks + self.probe_ticks
         """A monitoring cycle: the gap, then a probe."""
+        tuning = config.tuning
+        self.kick_growth = 2.0 ** (dt / tuning.kick_duration_s)
+        """The kick's growth a tick while the load does not move (doubling every
+        ``kick_duration_s``)."""
+        self.breakaway_speed = robust.breakaway_speed
+        self.held_ticks = round(robust.breakaway_s / dt)
+        self._filter = -math.expm1(-dt / MOVING_TIME_CONSTANT_S)
+        self._torque_filter = -math.expm1(-dt / SPIN_TORQUE_TIME_CONSTANT_S)
+        self._filtered: dict[int, Vec2] = {}
+        """The filtered velocities of the breakaway test: the contact's (key 0), each edge's."""
+        self.seed, self.robot = config.seed, config.robot
+        self._still = 0
+        """Ticks the load has been still after the kick's first ``kick_duration_s``: each
+        ``kick_duration_s`` of them the kick takes another direction."""
+        self._still_at_most = 0
+        """Ticks the kick has been at ``max_force`` with the load still."""
+        self.held = False
+        """Whether ``max_force``'s kick has not moved the load within ``breakaway_s``: the
+        floor holds it, and this robot pushes no more."""
+        self.kick_level = config.tuning.kick_force
+        """N: ``A_i``, the kick's size (grown while the load did not move)."""
+        self.spin_torque = 0.0
+        """N m: ``τ_i``, this robot's torque ``z_i × f_i`` about the centroid in Step 1's
+        spin-up, filtered over :data:`SPIN_TORQUE_TIME_CONSTANT_S`."""
+        self.push_level = 1.0
+        """The push's ``f`` is ``push_force`` times this (fixed at the start of Step 4)."""
         super().__init__(config, barrier)
+
+    # ---------------------------------------------------------------- Step 1: break away
+    def _excite_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
+        """The kick, growing for as long as the load does not move, else the spin-up (its gain
+        times the kick's level) and the damping; nothing once the floor is found to hold the
+        load."""
+        moving = self._moving(own, velocity)
+        t = self.tuning
+        if k >= self.kick_ticks and moving:
+            gain = t.spin_gain * (self.kick_level / t.kick_force)
+            spin = spin_up_force(gain, t.spin_speed, own.zdot.values())
+            brake = self._brake_force(k, own, velocity)
+            force = saturate((spin[0] + brake[0], spin[1] + brake[1]), t.max_force)
+            z = own.centroid
+            self.spin_torque += self._torque_filter * (
+                z[0] * force[1] - z[1] * force[0] - self.spin_torque
+            )
+            return force
+        if k >= self.kick_ticks:
+            self._grow_kick()
+            still = self._still + 1
+            self._still = still
+            attempt, left = divmod(still, self.kick_ticks)
+            if left == 0:  # another direction, another wrench
+                self.kick = kick_force(self.seed, self.robot, t.kick_force, attempt)
+        scale = self.kick_level / t.kick_force
+        return (scale * self.kick[0], scale * self.kick[1])
+
+    def _grow_kick(self) -> None:
+        """One tick of the load still after the kick's first ``kick_duration_s``: the kick
+        grows, up to ``max_force``, where ``breakaway_s`` of it finds the load held."""
+        most = self.tuning.max_force
+        if self.kick_level < most:
+            self.kick_level = min(most, self.kick_level * self.kick_growth)
+            return
+        self._still_at_most += 1
+        if self._still_at_most >= self.held_ticks:
+            self.held = True
+            self.held_because = (
+                f"Step 1's kick, grown to max_force = {most:g} N a robot, did not move the load"
+                f" within breakaway_s = {self.tuning.robust.breakaway_s:g} s"
+            )
+
+    def _moving(self, own: OwnEstimates, velocity: Vec2) -> bool:
+        """Whether the filtered contact velocity, or a filtered relative velocity, is faster
+        than ``breakaway_speed`` (each filter first-order, :data:`MOVING_TIME_CONSTANT_S`)."""
+        a, filtered = self._filter, self._filtered
+        fastest = 0.0
+        for key, (vx, vy) in ((0, velocity), *own.zdot.items()):
+            fx, fy = filtered.get(key, (0.0, 0.0))
+            fx, fy = fx + a * (vx - fx), fy + a * (vy - fy)
+            filtered[key] = (fx, fy)
+            fastest = max(fastest, fx * fx + fy * fy)
+        return fastest > self.breakaway_speed**2
+
+    def _inertia_size(self, own: OwnEstimates) -> float:
+        """``F`` of Step 4's torque ``F √w``: ``inertia_force``, or more where the floor's
+        friction torque met by Step 1's spin-up, ``τ̂₁ = n |τ̄|`` (the team's mean torque
+        ``mean_spin_torque``), calls for more: at least :data:`INERTIA_FRICTION_MARGIN` ``τ̂₁``
+        (rounded up to a quarter of a doubling of ``inertia_force``, the same for every robot),
+        within ``max_force``. Also fixes the push's level: ``n f`` at least
+        :data:`PUSH_FRICTION_MARGIN` times the friction force ``τ̂₁ / √(w/n)``
+        (:meth:`_push_magnitude`)."""
+        t = self.tuning
+        w = self.n * own.mean_square_offset
+        friction = self.n * abs(own.mean_spin_torque)
+        push = PUSH_FRICTION_MARGIN * friction / math.sqrt(self.n * w)
+        self.push_level = _rounded_up(push / t.robust.push_force)
+        needed = INERTIA_FRICTION_MARGIN * friction / math.sqrt(w)
+        if needed > t.max_force * INERTIA_FRICTION_MARGIN / LEAST_FRICTION_MARGIN:
+            # Step 4 would stall in every brake: stick-slip, which its fit does not model
+            self.held = True
+            self.held_because = (
+                f"the floor's friction torque met in Step 1, {friction:.3g} N m, asks more of"
+                f" Step 4 than max_force = {t.max_force:g} N a robot gives"
+                f" ({t.max_force * math.sqrt(w):.3g} N m, less than {LEAST_FRICTION_MARGIN:g}"
+                " times it)"
+            )
+            return t.max_force
+        return min(t.inertia_force * _rounded_up(needed / t.inertia_force), t.max_force)
 
     def _inertia_direction(self, k: int, own: OwnEstimates) -> float:
         """Speed up, then brake as long (after braking for ``inertia_brake_s``), from the
@@ -71,7 +224,7 @@ class RobustPhases(PhaseMachine):
         return 1.0 if since >= 0 and flips % 2 == 0 else -self.brake_level
 
     def _push_magnitude(self, moment: float) -> float:
-        return self.tuning.robust.push_force
+        return self.tuning.robust.push_force * self.push_level
 
     # ---------------------------------------------------------------- the push's stages
     def _push_stage(self, tick: int) -> int:
@@ -217,3 +370,12 @@ class RobustPhases(PhaseMachine):
 
 def _changed(k: int, own: OwnEstimates) -> bool:
     return own.changed
+
+
+def _rounded_up(ratio: float) -> float:
+    """``ratio`` rounded up to ``2^(q/4)`` (:data:`LEVELS_PER_DOUBLING`), at least 1: every
+    robot's consensus on a team's mean agrees to far better than that step, so every robot
+    takes the same level."""
+    if not ratio > 1.0:
+        return 1.0
+    return 2.0 ** (math.ceil(LEVELS_PER_DOUBLING * math.log2(ratio) - 1e-9) / LEVELS_PER_DOUBLING)

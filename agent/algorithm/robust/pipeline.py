@@ -36,7 +36,7 @@ from agent.platform.protocol import Estimates
 
 if TYPE_CHECKING:
     from agent.algorithm.inbox import Inbox
-    from agent.algorithm.interfaces import ProbeSchedule
+    from agent.algorithm.interfaces import ProbeSchedule, Schedule
 
 
 STUCK_TURN = 0.02
@@ -61,6 +61,8 @@ class RobustPipeline(EstimationPipeline):
         """This robot's drive gain (Step 7 scales ``m`` by the team's mean)."""
         self._mass_input = (0.0, 0.0)
         """This robot's ``(ι_i, ι_i m_i)``, the inputs of the team's mass."""
+        self._torque_input = 0.0
+        """This robot's torque in Step 1's spin-up, the input of the team's mean."""
         super().__init__(config, neighbours)
         self.rotation = RotationConsensus(len(neighbours), config.n)
         """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
@@ -148,10 +150,11 @@ class RobustPipeline(EstimationPipeline):
         edge.update(zdot, dt, follow=False)  # its direction follows the team's rotation
 
     def _inputs(self, x: Vec2) -> Sequence[float]:
-        return inputs(x, self.drive.estimate, self._mass_input)
+        return inputs(x, self.drive.estimate, self._mass_input, self._torque_input)
 
-    def _before_consensus(self) -> None:
+    def _before_consensus(self, schedule: Schedule) -> None:
         self._mass_input = mass_input(*self._own_mass())  # the input of the team's (Step 7)
+        self._torque_input = schedule.spin_torque
 
     def _turn(
         self, zdots: dict[int, Vec2], interval: float, inbox: Inbox, ref: int | None

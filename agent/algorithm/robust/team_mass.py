@@ -42,14 +42,15 @@ def mass_input(mass: float | None, std: float | None) -> tuple[float, float]:
 
 
 def inputs(
-    x: Vec2, gain: float, mass: tuple[float, float]
-) -> tuple[float, float, float, float, float, float, float]:
+    x: Vec2, gain: float, mass: tuple[float, float], torque: float
+) -> tuple[float, float, float, float, float, float, float, float]:
     """A robot's inputs of the team's means, in declaration order
     (:data:`agent.platform.team.TEAM_QUANTITIES`): ``‖x_i‖²`` (→ ``w / n``), ``g_i``,
-    ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i`` and ``ι_i m_i``, for its offsets iterate ``x``, its drive's
-    gain and its mass input (:func:`mass_input`)."""
+    ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i`` and ``τ_i``, for its offsets iterate ``x``,
+    its drive's gain, its mass input (:func:`mass_input`) and its torque in Step 1's spin-up
+    (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`)."""
     norm2 = x[0] * x[0] + x[1] * x[1]
-    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, mass[0], mass[1])
+    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, mass[0], mass[1], torque)
 
 
 def team_mass(information: float, weighted: float, own: float) -> tuple[float, float] | None:

@@ -28,6 +28,15 @@ class RobustTuning:
     whose friction torque brakes the turn all the while, equal levels would stop the load
     within a few flips; below 1 the turn keeps up (a frictionless load's turn grows by
     ``(1 − this) k w T / 2J`` a flip). 1: the paper's symmetric torque."""
+    breakaway_speed: float = bounded(0.05, 0, 10, "m/s", open_low=True)
+    """m/s: Step 1's kick grows (doubling every ``kick_duration_s``, up to ``max_force``) until
+    the robot's contact, or its speed relative to a neighbour's, filtered over
+    :data:`~agent.algorithm.robust.phases.MOVING_TIME_CONSTANT_S`, is faster than this: the
+    load has broken away from its floor. Every force of the later steps is then that kick's
+    level times its setting (:attr:`~agent.algorithm.robust.phases.RobustPhases.level`)."""
+    breakaway_s: float = bounded(3.0, 0, 600, "s", min_ticks=1)
+    """s: a load that ``max_force``'s kick has not moved after this long is held by its floor:
+    the robots stop pushing, with the verdict "cannot break the load away"."""
     push_force: float = bounded(2.0, 0, 1000, "N", open_low=True)
     """N: every robot pushes with exactly this (at most ``max_force``): the robots' Ĵ differ by
     their noise, and eq. (17)'s ``f̄_y Ĵ/n`` would make their forces differ too, where Steps 5

@@ -482,7 +482,9 @@ class Member(TeamConsensus):
 
     def __init__(self, robot: int, neighbours):
         self.gain_input, self.mass_input = 1.0, (0.0, 0.0)
-        super().__init__(robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input))
+        super().__init__(
+            robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input, 0.0)
+        )
 
     xi = property(lambda self: self["mean_square_offset"])
     gain = property(lambda self: self["mean_gain"])
@@ -695,7 +697,7 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
         degree=1,
         # x_j where this robot's x_i will be: the iteration's own term is nil.
         consensus=ConsensusState(centroid_offset=(0.5, -1.0), mean_square_offset=2.0),
-        flows=((0, 0.5, -1.0, 0.25, *[0.0] * 6),),
+        flows=((0, 0.5, -1.0, 0.25, *[0.0] * 7),),
         instant=t - 2,
     )
     c.update(phi, {1: theirs}, frame)
