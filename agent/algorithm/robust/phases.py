@@ -71,7 +71,7 @@ INERTIA_FRICTION_MARGIN = 4.0
 """Step 4's torque is at least this many times the friction torque that Step 1's spin-up met:
 speeding up, ``T − τ_c``, and braking at ``inertia_brake_level`` = 0.5, ``T/2 + τ_c``, are then
 equal, and the turn neither dies nor grows from flip to flip."""
-LEAST_FRICTION_MARGIN = 2.5
+LEAST_FRICTION_MARGIN = 2.0
 """Step 4's torque within ``max_force`` at least this many times ``τ̂₁``, or the team stops
 with the verdict that it cannot break the load away: braking, the floor and the brake together
 would stop the turn at every flip, and the load would stick and slip, which Step 4's fit does

@@ -1,6 +1,6 @@
 """A load the team's forces cannot move gets a verdict, not numbers: on ``pallet.toml`` (a 30 kg
 pallet on nine blocks, μ = 0.3, μ_s = 0.35) the floor's friction torque that Step 1's spin-up
-meets asks more of Step 4 than ``max_force`` = 80 N a robot gives; with ``max_force`` = 20 N a
+meets asks more of Step 4 than ``max_force`` = 60 N a robot gives; with ``max_force`` = 20 N a
 robot (80 N in all, under the 103 N that breaks it away) Step 1's kick never moves it. Either
 way every robot says so and stops pushing, and the run ends with that verdict at once."""
 
@@ -30,7 +30,7 @@ def _held(outcome, detail: str) -> None:
 
 def test_a_load_the_team_cannot_turn_steadily_gets_a_verdict_not_numbers() -> None:
     outcome = run_inprocess(load_scenario(PALLET))
-    _held(outcome, "asks more of Step 4 than max_force = 80 N")
+    _held(outcome, "asks more of Step 4 than max_force = 60 N")
     # the friction torque the spin-up met, against the truth's μ m g c (41 N m)
     found = float(outcome.detail.split("met in Step 1, ")[1].split(" N m")[0])
     truth = outcome.final.truth
