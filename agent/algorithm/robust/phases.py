@@ -75,8 +75,8 @@ LEAST_FRICTION_MARGIN = 2.0
 """Step 4's torque within ``max_force`` at least this many times ``τ̂₁``, or the team stops
 with the verdict that it cannot break the load away: braking, the floor and the brake together
 would stop the turn at every flip, and the load would stick and slip, which Step 4's fit does
-not model (``pallet.toml``: 86 N m against 41 N m gave m 11 % off and the load off its
-floor)."""
+not model (``pallet.toml`` with robots of 80 N, 86 N m against its 41 N m: the load turned
+at up to 6.2 rad/s, three times its floor's ``|ω|``, and its J's interval was ±30 %)."""
 PUSH_FRICTION_MARGIN = 3.0
 """The push's common force makes the team's ``n f`` at least this many times the floor's
 friction force, taken as ``τ̂₁ / r`` with ``r = √(w/n)`` the contacts' root-mean-square
