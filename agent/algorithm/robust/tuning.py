@@ -32,8 +32,8 @@ class RobustTuning:
     """m/s: Step 1's kick grows (doubling every ``kick_duration_s``, up to ``max_force``) until
     the robot's contact, or its speed relative to a neighbour's, filtered over
     :data:`~agent.algorithm.robust.phases.MOVING_TIME_CONSTANT_S`, is faster than this: the
-    load has broken away from its floor. Every force of the later steps is then that kick's
-    level times its setting (:attr:`~agent.algorithm.robust.phases.RobustPhases.level`)."""
+    load has broken away from its floor, and the spin-up's gain is ``spin_gain`` times the
+    kick's growth."""
     breakaway_s: float = bounded(3.0, 0, 600, "s", min_ticks=1)
     """s: a load that ``max_force``'s kick has not moved after this long is held by its floor:
     the robots stop pushing, with the verdict "cannot break the load away"."""
