@@ -29,6 +29,17 @@ robot that hears of more rejoins catches up with them, as with a later phase (it
 agreed tick: in real time a proposal crosses the graph more slowly than one hop a tick; or it is
 a new process of a robot that was lost, joining the halted team); a neighbour's message of fewer
 rejoins is ignored.
+
+A family may size the forces of Steps 4 to 7 on what Step 1 measured (the robust estimators:
+on the floor's friction torque, :mod:`agent.algorithm.robust.phases`), in discrete *levels*.
+Every robot's value of what it measured differs from the others' by a little, and a little
+is enough to round to another level at a boundary: a robot that pushed one level harder than
+the others assume would bias every fit of the team. So the barrier agrees on them: a robot
+that becomes ready to leave Step 1 asks for its levels, the team keeps the largest asked for
+(merged like the ready robots, with the neighbours of the same rejoins), and since every robot
+must be ready before any proposes the switch, every robot has the same levels at the agreed
+tick. They hold for the rest of the run (a load change keeps the floor) and begin again at 0
+after a halt.
 """
 
 from __future__ import annotations
@@ -56,11 +67,16 @@ class PhaseBarrier:
         """How many times the team has restarted for a changed load."""
         self.rejoins = 0
         """How many times the team has begun again after a halt."""
+        self.levels = (0, 0)
+        """The largest levels asked for by the robots ready to leave Step 1 (see the module
+        docstring)."""
 
     @property
     def state(self) -> Barrier:
         """This view, as shared."""
-        return Barrier(self.phase, self.ready, self.switch_at, self.load_changes, self.rejoins)
+        return Barrier(
+            self.phase, self.ready, self.switch_at, self.load_changes, self.rejoins, self.levels
+        )
 
     def _enter(self, phase: int, load_changes: int) -> None:
         self.phase = Phase(phase)
@@ -78,10 +94,16 @@ class PhaseBarrier:
         changes, then phase."""
         return (rejoins, phase == Phase.HALTED, load_changes, phase)
 
-    def step(self, tick: int, own_ready: bool, barriers: Iterable[Barrier]) -> bool:
-        """Merge the neighbours' views and our readiness; returns ``True`` if the phase
-        (or the load changes, or the rejoins) changed at this tick (the new one applies from
-        ``tick`` on)."""
+    def step(
+        self,
+        tick: int,
+        own_ready: bool,
+        barriers: Iterable[Barrier],
+        levels: tuple[int, int] = (0, 0),
+    ) -> bool:
+        """Merge the neighbours' views and our readiness (with the ``levels`` this robot asks
+        for once ready to leave Step 1); returns ``True`` if the phase (or the load changes,
+        or the rejoins) changed at this tick (the new one applies from ``tick`` on)."""
         start = (self.phase, self.load_changes, self.rejoins)
         order = self._order
         views = [b for b in barriers if b.rejoins >= self.rejoins]
@@ -89,8 +111,13 @@ class PhaseBarrier:
         if latest is not None and order(latest.rejoins, latest.phase, latest.load_changes) > order(
             self.rejoins, self.phase, self.load_changes
         ):
+            if latest.rejoins > self.rejoins:
+                self.levels = (0, 0)
             self.rejoins = latest.rejoins
             self._enter(latest.phase, latest.load_changes)
+        for b in views:
+            if b.rejoins == self.rejoins:
+                self.levels = _larger(self.levels, b.levels)
         latest_proposal = tick + self.n + self.margin  # no robot can have proposed later
         for b in views:
             if (b.phase, b.load_changes, b.rejoins) == (
@@ -104,7 +131,10 @@ class PhaseBarrier:
                 ):
                     self.switch_at = b.switch_at
         if own_ready and (self.phase, self.load_changes, self.rejoins) == start:
-            self.ready |= 1 << (self.robot - 1)
+            own = 1 << (self.robot - 1)
+            if self.phase == Phase.EXCITE and not self.ready & own:
+                self.levels = _larger(self.levels, levels)
+            self.ready |= own
         # Leaving a phase takes every robot; restarting for a changed load, any one.
         enough = self.ready != 0 if self.phase == Phase.DONE else self.ready == self.all_ready
         if enough and self.switch_at < 0:
@@ -114,7 +144,13 @@ class PhaseBarrier:
                 self._enter(Phase.INERTIA, self.load_changes + 1)
             elif self.phase == Phase.HALTED:
                 self.rejoins += 1
+                self.levels = (0, 0)
                 self._enter(Phase.EXCITE, 0)
             else:
                 self._enter(self.phase + 1, self.load_changes)
         return (self.phase, self.load_changes, self.rejoins) != start
+
+
+def _larger(a: tuple[int, int], b: tuple[int, int]) -> tuple[int, int]:
+    """Each level the larger of the two."""
+    return (max(a[0], b[0]), max(a[1], b[1]))

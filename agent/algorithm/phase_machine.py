@@ -152,7 +152,9 @@ class PhaseMachine:
         """Tick ``k`` of the barrier, on this robot's readiness and its neighbours' latest
         views of it; returns ``True`` if a new phase begins at ``k`` (its force law is then set
         up from ``own``)."""
-        if not self.barrier.step(k, self._ready(k, own), barriers):
+        ready = self._ready(k, own)
+        levels = self._levels(own) if ready and self.barrier.phase == Phase.EXCITE else (0, 0)
+        if not self.barrier.step(k, ready, barriers, levels):
             return False
         phase = self.barrier.phase
         if not self._can_enter(phase, own):
@@ -320,6 +322,11 @@ class PhaseMachine:
     def _inertia_size(self, own: OwnEstimates) -> float:
         """``F`` of eq. (14)'s gain ``k = F/√w`` (N): ``inertia_force``."""
         return self.tuning.inertia_force
+
+    def _levels(self, own: OwnEstimates) -> tuple[int, int]:
+        """The levels of Step 4's torque and of the push that this robot asks for as it
+        becomes ready to leave Step 1 (:attr:`~agent.platform.protocol.Barrier.levels`): none."""
+        return (0, 0)
 
     def _pushing(self, k: int, own: OwnEstimates, velocity: Vec2, push: Vec2) -> Vec2:
         """The force of tick ``k`` of the push, given the common force ``push`` with its sign."""

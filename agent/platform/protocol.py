@@ -108,6 +108,11 @@ class Barrier:
     rejoins: int = 0
     """How many times the team has begun again from Step 1 after a halt (every robot back);
     its ticks count from then on as from the start."""
+    levels: tuple[int, int] = (0, 0)
+    """The levels the team sizes Step 4's torque and the push's force by, in steps of a quarter
+    doubling of their settings, 0 to :data:`HELD_LEVEL` (the floor holds the load; one byte
+    each on the wire), the largest any
+    robot asked for when it became ready to leave Step 1 (:mod:`agent.algorithm.coordination`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -523,7 +528,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 10
+WIRE_VERSION = 11
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -789,6 +794,9 @@ MAX_LOAD_CHANGES = 10_000
 """The team's restarts for a changed load in one run (one a second for almost three hours)."""
 MAX_REJOINS = 10_000
 """The team's new beginnings after a halt in one run."""
+HELD_LEVEL = 255
+"""A barrier's level that says the floor holds the load beyond the team's forces
+(:attr:`Barrier.levels`); the levels that size forces are below it."""
 MAX_VERTICES = 1000
 """Of the load's outline."""
 MAX_COORDINATE = 1000.0
@@ -966,7 +974,7 @@ class ShareWire:
     """:class:`Share`'s wire layout and domain checks, derived from the team quantities'
     declarations (:mod:`agent.platform.team`): one number per component of each quantity's state
     and of each flow. The fixed part: sender, tick, velocity, degree, instant; the barrier
-    (phase, ready, switch_at, load_changes, rejoins); the quantities' layout code
+    (phase, ready, switch_at, load_changes, rejoins, the two levels); the quantities' layout code
     (:func:`~agent.platform.team.layout_code`) and states; how many flows follow, each the
     neighbour's id and the flow-form quantities' outflows, in declaration order."""
 
@@ -975,7 +983,7 @@ class ShareWire:
     ):
         self.quantities = tuple(quantities)
         self.state_type = state_type or _team.consensus_state_type(self.quantities)
-        self.fixed = _struct.Struct(f"<Hq2dHqBQqHHH{_team.width(self.quantities)}dB")
+        self.fixed = _struct.Struct(f"<Hq2dHqBQqHHBBH{_team.width(self.quantities)}dB")
         self.flow = _struct.Struct(f"<H{_team.flow_width(self.quantities)}d")
         self.flow_fields = 1 + _team.flow_width(self.quantities)
         """A flow's numbers: the neighbour, then the outflows."""
@@ -995,6 +1003,7 @@ class ShareWire:
             b.switch_at,
             b.load_changes,
             b.rejoins,
+            *b.levels,
             self.layout,
             *_team.flatten(m.consensus, self.quantities),
             len(m.flows),
@@ -1009,7 +1018,7 @@ class ShareWire:
         sender, tick, vx, vy, degree, instant, phase, ready, switch_at, changes, rejoins = values[
             :11
         ]
-        layout, count = values[11], values[-1]
+        levels, layout, count = values[11:13], values[13], values[-1]
         if layout != self.layout:
             raise DecodeError(
                 f"share: team quantities of layout 0x{layout:04x}, this program's"
@@ -1022,8 +1031,8 @@ class ShareWire:
             _unpack(flow, rest[i : i + flow.size], "share flow")
             for i in range(0, len(rest), flow.size)
         )
-        barrier = Barrier(_phase(phase, "share"), ready, switch_at, changes, rejoins)
-        consensus = self.state_type(*_team.grouped(values[12:-1], self.quantities))
+        barrier = Barrier(_phase(phase, "share"), ready, switch_at, changes, rejoins, levels)
+        consensus = self.state_type(*_team.grouped(values[14:-1], self.quantities))
         return Share(sender, tick, (vx, vy), degree, instant, barrier, consensus, flows)
 
     def check(self, m: Share) -> None:

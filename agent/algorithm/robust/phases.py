@@ -15,7 +15,8 @@
   (:attr:`RobustPhases.spin_torque`); the team averages it (``mean_spin_torque``,
   :mod:`agent.platform.team`), and once Step 1 has settled (a steady turn) ``τ̂₁ = n |τ̄|`` is
   the floor's friction torque: Step 4's torque and the push's force are sized against it
-  (:meth:`RobustPhases._inertia_size`), rounded up to a step every robot agrees on;
+  (:meth:`RobustPhases._levels`), rounded up to a step the team agrees on at the phase
+  barrier;
 - *inertia*: the robots' ω differ by their noise, so rather than reverse on ``|ω|`` the torque
   speeds up for ``inertia_flip_s`` and brakes for as long (with ``inertia_brake_level`` of it:
   the floor's friction brakes too), in turn, from the agreed tick on
@@ -56,7 +57,7 @@ from agent.algorithm.phase_machine import Law, PhaseMachine, Ready, _never_ready
 from agent.algorithm.safety import saturate
 from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2, rotate
-from agent.platform.protocol import Phase
+from agent.platform.protocol import HELD_LEVEL, Phase
 
 MOVING_TIME_CONSTANT_S = 0.1
 """s: the time constant of the first-order filters of the robot's contact velocity and of its
@@ -83,8 +84,11 @@ friction force, taken as ``τ̂₁ / r`` with ``r = √(w/n)`` the contacts' roo
 distance from their centroid (the supports' friction radius ``c`` is less for a load pushed at
 its rim): the translation of Step 7's stage then slides the load, with a speed that grows."""
 LEVELS_PER_DOUBLING = 4
-"""Step 4's ``F`` and the push's ``f`` are their settings times ``2^(q/4)``: the robots'
-consensus on ``τ̄`` agrees to far better than that step, so every robot takes the same."""
+"""Step 4's ``F`` and the push's ``f`` are their settings times ``2^(q/4)``, ``q`` the level
+the team agreed on (the largest any robot asked for, :mod:`agent.algorithm.coordination`):
+the robots' consensus on ``τ̄`` agrees to far better than that step, but not always on which
+side of a step's boundary it lies (a generated load of 8 robots took two levels, ``Ĵ`` 12 %
+off on the robots that assumed the lower)."""
 
 
 class RobustPhases(PhaseMachine):
@@ -190,22 +194,40 @@ class RobustPhases(PhaseMachine):
             fastest = max(fastest, fx * fx + fy * fy)
         return fastest > self.breakaway_speed**2
 
-    def _inertia_size(self, own: OwnEstimates) -> float:
-        """``F`` of Step 4's torque ``F √w``: ``inertia_force``, or more where the floor's
-        friction torque met by Step 1's spin-up, ``τ̂₁ = n |τ̄|`` (the team's mean torque
-        ``mean_spin_torque``), calls for more: at least :data:`INERTIA_FRICTION_MARGIN` ``τ̂₁``
-        (rounded up to a quarter of a doubling of ``inertia_force``, the same for every robot),
-        within ``max_force``. Also fixes the push's level: ``n f`` at least
-        :data:`PUSH_FRICTION_MARGIN` times the friction force ``τ̂₁ / √(w/n)``
-        (:meth:`_push_magnitude`)."""
+    def _levels(self, own: OwnEstimates) -> tuple[int, int]:
+        """The levels this robot asks for (the team takes the largest, :mod:`agent.algorithm.
+        coordination`), from the floor's friction torque met by Step 1's spin-up,
+        ``τ̂₁ = n |τ̄|`` (the team's mean torque ``mean_spin_torque``): Step 4's ``F`` at least
+        :data:`INERTIA_FRICTION_MARGIN` ``τ̂₁ / √w``, and the push's ``n f`` at least
+        :data:`PUSH_FRICTION_MARGIN` times the friction force ``τ̂₁ / √(w/n)``, each in quarter
+        doublings of its setting (``inertia_force``, ``push_force``); :data:`~agent.platform.
+        protocol.HELD_LEVEL` for Step 4 if that ``F`` would be more than ``max_force``
+        :data:`INERTIA_FRICTION_MARGIN` / :data:`LEAST_FRICTION_MARGIN`."""
         t = self.tuning
         w = self.n * own.mean_square_offset
+        if not w > 0.0:
+            return (0, 0)
         friction = self.n * abs(own.mean_spin_torque)
         push = PUSH_FRICTION_MARGIN * friction / math.sqrt(self.n * w)
-        self.push_level = _rounded_up(push / t.robust.push_force)
         needed = INERTIA_FRICTION_MARGIN * friction / math.sqrt(w)
         if needed > t.max_force * INERTIA_FRICTION_MARGIN / LEAST_FRICTION_MARGIN:
-            # Step 4 would stall in every brake: stick-slip, which its fit does not model
+            inertia = HELD_LEVEL  # Step 4 would stall in every brake: stick-slip
+        else:
+            inertia = _quarter_doublings(needed / t.inertia_force)
+        return (inertia, _quarter_doublings(push / t.robust.push_force))
+
+    def _inertia_size(self, own: OwnEstimates) -> float:
+        """``F`` of Step 4's torque ``F √w``: ``inertia_force`` at the team's agreed level
+        (:meth:`_levels`), within ``max_force``; also fixes the push's level
+        (:meth:`_push_magnitude`). At :data:`~agent.platform.protocol.HELD_LEVEL` the robot
+        pushes no more: some robot found that the floor's friction torque asks more of Step 4
+        than ``max_force`` gives."""
+        t = self.tuning
+        inertia, push = self.barrier.levels
+        self.push_level = _level(push)
+        if inertia >= HELD_LEVEL:
+            w = self.n * own.mean_square_offset
+            friction = self.n * abs(own.mean_spin_torque)
             self.held = True
             self.held_because = (
                 f"the floor's friction torque met in Step 1, {friction:.3g} N m, asks more of"
@@ -214,7 +236,7 @@ class RobustPhases(PhaseMachine):
                 " times it)"
             )
             return t.max_force
-        return min(t.inertia_force * _rounded_up(needed / t.inertia_force), t.max_force)
+        return min(t.inertia_force * _level(inertia), t.max_force)
 
     def _inertia_direction(self, k: int, own: OwnEstimates) -> float:
         """Speed up, then brake as long (after braking for ``inertia_brake_s``), from the
@@ -372,10 +394,15 @@ def _changed(k: int, own: OwnEstimates) -> bool:
     return own.changed
 
 
-def _rounded_up(ratio: float) -> float:
-    """``ratio`` rounded up to ``2^(q/4)`` (:data:`LEVELS_PER_DOUBLING`), at least 1: every
-    robot's consensus on a team's mean agrees to far better than that step, so every robot
-    takes the same level."""
+def _quarter_doublings(ratio: float) -> int:
+    """The least ``q ≥ 0`` with ``2^(q/4) ≥ ratio`` (:data:`LEVELS_PER_DOUBLING`), below
+    :data:`~agent.platform.protocol.HELD_LEVEL`."""
     if not ratio > 1.0:
-        return 1.0
-    return 2.0 ** (math.ceil(LEVELS_PER_DOUBLING * math.log2(ratio) - 1e-9) / LEVELS_PER_DOUBLING)
+        return 0
+    q = math.ceil(LEVELS_PER_DOUBLING * math.log2(ratio) - 1e-9)
+    return min(q, HELD_LEVEL - 1)
+
+
+def _level(q: int) -> float:
+    """``2^(q/4)``: the factor of a level on its setting."""
+    return 2.0 ** (q / LEVELS_PER_DOUBLING)

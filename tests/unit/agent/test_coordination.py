@@ -47,8 +47,11 @@ class Team:
         ready_after: dict[int, dict[int, int | None]],
         margin: int = MARGIN,
         drop: Callable[[int, int, int], bool] | None = None,
+        levels: dict[int, tuple[int, int]] | None = None,
     ):
         self.n = n
+        self.levels = levels or {}
+        """The levels each robot asks for once ready to leave Step 1."""
         self.transport = InMemoryTransport(n, edges)
         self.barriers = {i: PhaseBarrier(i, n, margin) for i in range(1, n + 1)}
         self.ready_after = ready_after
@@ -78,7 +81,8 @@ class Team:
                 inbox[i] = [s for s in shares if not self.drop(tick, s.sender, i)]
             for i, b in self.barriers.items():
                 before = b.phase
-                changed = b.step(tick, self.own_ready(i), [s.barrier for s in inbox[i]])
+                asked = self.levels.get(i, (0, 0))
+                changed = b.step(tick, self.own_ready(i), [s.barrier for s in inbox[i]], asked)
                 assert changed == (b.phase != before)
                 assert b.phase >= before
                 if changed:
@@ -92,7 +96,9 @@ class Team:
                         tick=tick,
                         velocity=(0.0, 0.0),
                         degree=degree,
-                        barrier=Barrier(phase=b.phase, ready=b.ready, switch_at=b.switch_at),
+                        barrier=Barrier(
+                            phase=b.phase, ready=b.ready, switch_at=b.switch_at, levels=b.levels
+                        ),
                     )
                 )
             self.tick += 1
@@ -122,6 +128,44 @@ def test_barrier_switches_everyone_at_the_same_tick(kind, n):
         assert last_ready + n + MARGIN <= switch <= last_ready + 2 * n + MARGIN
         assert all(b.phase == 1 for b in team.barriers.values())
         assert all(b.ready == 0 and b.switch_at == -1 for b in team.barriers.values())
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_robot_leaves_step_1_with_the_largest_levels_asked_for(kind):
+    """Levels that robots ask for as they become ready (in any order, the largest asked last
+    on a path's far end) are the same on every robot at the agreed tick, and kept after it."""
+    n = 7
+    rng = random.Random(11 + KINDS.index(kind))
+    for _ in range(5):
+        ready = {i: rng.randint(0, 40) for i in range(1, n + 1)}
+        levels = {i: (rng.randint(0, 12), rng.randint(0, 12)) for i in ready}
+        last = max(ready, key=lambda i: ready[i])
+        levels[last] = (13, 2)  # the last robot ready asks for the most Step 4 torque
+        team = Team(n, graph(kind, n), {0: ready}, levels=levels)
+        team.run(40 + 2 * n + MARGIN + 1)
+        assert len(set(team.switch_ticks(1).values())) == 1
+        largest = (13, max(level[1] for level in levels.values()))
+        assert {b.levels for b in team.barriers.values()} == {largest}
+        team.run(3 * n)
+        assert {b.levels for b in team.barriers.values()} == {largest}
+
+
+def test_levels_begin_again_after_a_halt():
+    b = PhaseBarrier(1, 2, 0)
+    b.step(0, True, [], (5, 3))
+    b.step(1, False, [Barrier(ready=0b10, levels=(7, 1))])
+    assert b.levels == (7, 3)
+    # asked only once, as the robot becomes ready: a later ask is not taken
+    b.step(2, True, [], (9, 9))
+    assert b.levels == (7, 3)
+    b.halt()
+    b.step(4, True, [Barrier(phase=Phase.HALTED, ready=0b10, levels=(7, 3))])
+    b.step(5, False, [], (1, 1))
+    b.step(6, False, [], (1, 1))
+    assert b.phase is Phase.EXCITE and b.rejoins == 1 and b.levels == (0, 0)
+    # a neighbour's levels of an earlier beginning are not taken
+    b.step(7, False, [Barrier(levels=(7, 3))])
+    assert b.levels == (0, 0)
 
 
 @pytest.mark.parametrize("kind", ["path", "ring", "star"])

@@ -87,7 +87,7 @@ SHARE_CENTROID = Share(
     tick=500,
     velocity=(-0.5, 0.75),
     degree=1,
-    barrier=Barrier(phase=Phase.PUSH, ready=0b1011, switch_at=620),
+    barrier=Barrier(phase=Phase.PUSH, ready=0b1011, switch_at=620, levels=(7, 254)),
     consensus=ConsensusState(centroid_offset=(1.5, -2.25), mean_square_offset=3.125),
 )
 SHARE_FLOWS = Share(
