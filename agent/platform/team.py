@@ -147,6 +147,20 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
         doc="μ_i → the mean of ι_j m_j: the team's mass is μ / ι",
     ),
     TeamQuantity(
+        "mean_weighted_log_mass",
+        1,
+        MAX_FLOW,
+        Averaging.MEAN,
+        doc="λ_i → the mean of ι_j ln m_j (m in kg; robust Step 7)",
+    ),
+    TeamQuantity(
+        "mean_weighted_square_log_mass",
+        1,
+        MAX_FLOW,
+        Averaging.MEAN,
+        doc="ψ_i → the mean of ι_j (ln m_j)²: with λ and ι, how far the robots' fits are apart",
+    ),
+    TeamQuantity(
         "mean_spin_torque",
         1,
         MAX_FORCE * MAX_DISTANCE,

@@ -45,7 +45,7 @@ class PaperPipeline(EstimationPipeline):
         """``‖x_i‖²`` (→ ``w / n``); ideal drives (gain 1), no mass information and no spin
         torque (the robust family's)."""
         norm2 = x[0] * x[0] + x[1] * x[1]
-        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0)
+        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0)
 
     def enter(self, phase: Phase, k: int, schedule: Schedule) -> None:
         super().enter(phase, k, schedule)

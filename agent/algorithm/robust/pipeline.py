@@ -28,7 +28,7 @@ from agent.algorithm.robust.inertia_fit import InertiaFit
 from agent.algorithm.robust.load_change import ProbeFit
 from agent.algorithm.robust.mass_fit import MassFit
 from agent.algorithm.robust.rotation import RotationConsensus, own_turn, turn_weight, wrapped
-from agent.algorithm.robust.team_mass import inputs, mass_input, team_mass
+from agent.algorithm.robust.team_mass import disagreement, inputs, mass_input, team_mass
 from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, FitShares, packed
 from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2, turned_covariance
@@ -59,8 +59,9 @@ class RobustPipeline(EstimationPipeline):
         self._settle_uncertainty = config.tuning.robust.settle_uncertainty
         self.drive = DriveGain()
         """This robot's drive gain (Step 7 scales ``m`` by the team's mean)."""
-        self._mass_input = (0.0, 0.0)
-        """This robot's ``(ι_i, ι_i m_i)``, the inputs of the team's mass."""
+        self._mass_input = (0.0, 0.0, 0.0, 0.0)
+        """This robot's ``(ι_i, ι_i m_i, ι_i ln m_i, ι_i (ln m_i)²)``, the inputs of the
+        team's mass."""
         self._torque_input = 0.0
         """This robot's torque in Step 1's spin-up, the input of the team's mean."""
         super().__init__(config, neighbours)
@@ -386,6 +387,14 @@ class RobustPipeline(EstimationPipeline):
         if moment_std is not None:
             moment_std = math.hypot(moment_std * self._torque_gain, moment * team_gain_std)
         _, mass_std = self._robust_mass()
+        if mass_std is not None:
+            c = self.consensus
+            mass_std *= disagreement(
+                c["mean_mass_information"],
+                c["mean_weighted_log_mass"],
+                c["mean_weighted_square_log_mass"],
+                self.n,
+            )
         scale = PUBLISHED_VARIANCE["relative"]
         out: dict = {
             "drive_gain": None if drive_std is None else self.drive.estimate,

@@ -18,6 +18,16 @@ Its relative standard deviation is published as ``ρ₀ / √ι`` (``ι`` the me
 of a robot of average information, as if the robots' errors were fully correlated. They are
 partly: the fits share the forces, the angle and the gains, while each robot's own velocity
 noise averages out.
+
+The robots' fits may also be further apart than their standard deviations say: each fit's
+model leaves out what the floor, the drives and the other estimates add. The team measures
+it, with two more averages, of ``ι_i ln m_i`` (``λ``) and ``ι_i (ln m_i)²`` (``ψ``): the
+fits' weighted spread ``s² = ψ/ι − (λ/ι)²`` (relative), and their chi-square about their
+weighted mean ``χ² = Σ ι_i (ln m_i − λ/ι)² / ρ₀² = n ι s² / ρ₀²``. Where ``χ²/(n − 1) > 1``
+the published standard deviation is scaled by ``S = √(χ²/(n − 1))`` (:func:`disagreement`,
+the scale factor of a weighted mean of inconsistent measurements, as particle physicists'
+tables of averages apply it): fits that disagree widen the team's interval by as much as they
+disagree, never narrow it.
 """
 
 from __future__ import annotations
@@ -26,31 +36,35 @@ import math
 
 from agent.platform.geometry import Vec2
 
+RHO0 = 0.01
+"""``ρ₀``: the relative standard deviation of one unit of a mass fit's information."""
 MAX_MASS_INFORMATION = 1e4
 """A mass fit's information at most this many times that of a 1 % standard deviation (0.01 %):
 more is not believed, and it bounds the consensus states and flows."""
 
 
-def mass_input(mass: float | None, std: float | None) -> tuple[float, float]:
-    """``(ι_i, ι_i m_i)`` for a robot's own mass fit ``mass`` with standard deviation ``std``
-    (``(0, 0)``: no fit yet)."""
+def mass_input(mass: float | None, std: float | None) -> tuple[float, float, float, float]:
+    """``(ι_i, ι_i m_i, ι_i ln m_i, ι_i (ln m_i)²)`` for a robot's own mass fit ``mass`` (kg)
+    with standard deviation ``std`` (zeros: no fit yet)."""
     if mass is None or std is None or mass <= 0.0:
-        return (0.0, 0.0)
-    information = MAX_MASS_INFORMATION if std <= 0.0 else (0.01 * mass / std) ** 2
+        return (0.0, 0.0, 0.0, 0.0)
+    information = MAX_MASS_INFORMATION if std <= 0.0 else (RHO0 * mass / std) ** 2
     information = min(information, MAX_MASS_INFORMATION)
-    return (information, information * mass)
+    log = math.log(mass)
+    return (information, information * mass, information * log, information * log * log)
 
 
 def inputs(
-    x: Vec2, gain: float, mass: tuple[float, float], torque: float
-) -> tuple[float, float, float, float, float, float, float, float]:
+    x: Vec2, gain: float, mass: tuple[float, float, float, float], torque: float
+) -> tuple[float, ...]:
     """A robot's inputs of the team's means, in declaration order
     (:data:`agent.platform.team.TEAM_QUANTITIES`): ``‖x_i‖²`` (→ ``w / n``), ``g_i``,
-    ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i`` and ``τ_i``, for its offsets iterate ``x``,
+    ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i``, ``ι_i ln m_i``, ``ι_i (ln m_i)²`` and
+    ``τ_i``, for its offsets iterate ``x``,
     its drive's gain, its mass input (:func:`mass_input`) and its torque in Step 1's spin-up
     (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`)."""
     norm2 = x[0] * x[0] + x[1] * x[1]
-    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, mass[0], mass[1], torque)
+    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, *mass, torque)
 
 
 def team_mass(information: float, weighted: float, own: float) -> tuple[float, float] | None:
@@ -64,4 +78,19 @@ def team_mass(information: float, weighted: float, own: float) -> tuple[float, f
     mass = weighted / information
     if not 0.5 * own <= mass <= 2.0 * own:
         return None
-    return (mass, 0.01 / math.sqrt(information))
+    return (mass, RHO0 / math.sqrt(information))
+
+
+def disagreement(
+    information: float, weighted_log: float, weighted_square_log: float, n: int
+) -> float:
+    """``S = max(1, √(χ²/(n − 1)))``, ``χ² = n ι s² / ρ₀²`` with ``s² = ψ/ι − (λ/ι)²``, from the
+    consensus states ``ι``, ``λ`` (``weighted_log``) and ``ψ`` (``weighted_square_log``): the
+    factor on the team's mass's standard deviation for fits further apart than their own
+    standard deviations say (1 for a lone robot, or before the states are a weighted mean)."""
+    if n < 2 or not information > 0.0:
+        return 1.0
+    mean = weighted_log / information
+    spread = weighted_square_log / information - mean * mean
+    chi2 = n * information * max(spread, 0.0) / RHO0**2
+    return max(1.0, math.sqrt(chi2 / (n - 1)))

@@ -35,11 +35,17 @@ from agent.algorithm.paper.filtered_regression import FilteredRegression
 from agent.algorithm.paper.inertia import InertiaEstimator
 from agent.algorithm.paper.mass import MassEstimator
 from agent.algorithm.paper.relative_position import RelativePosition
-from agent.algorithm.robust.team_mass import MAX_MASS_INFORMATION, inputs, mass_input, team_mass
+from agent.algorithm.robust.team_mass import (
+    MAX_MASS_INFORMATION,
+    disagreement,
+    inputs,
+    mass_input,
+    team_mass,
+)
 from agent.algorithm.safety import saturate
 from agent.platform.geometry import angle_between, arc_factor, cross, rotate
 from agent.platform.protocol import Share
-from agent.platform.team import ConsensusState
+from agent.platform.team import ConsensusState, flow_width
 
 Q = np.array([[0.0, -1.0], [1.0, 0.0]])
 FAST = settings(max_examples=50, deadline=None)
@@ -481,7 +487,7 @@ class Member(TeamConsensus):
     and its mass input; its states by their symbols."""
 
     def __init__(self, robot: int, neighbours):
-        self.gain_input, self.mass_input = 1.0, (0.0, 0.0)
+        self.gain_input, self.mass_input = 1.0, (0.0, 0.0, 0.0, 0.0)
         super().__init__(
             robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input, 0.0)
         )
@@ -493,6 +499,14 @@ class Member(TeamConsensus):
 
     def team_mass(self, own: float):
         return team_mass(self["mean_mass_information"], self["mean_weighted_mass"], own)
+
+    def disagreement(self, n: int) -> float:
+        return disagreement(
+            self["mean_mass_information"],
+            self["mean_weighted_log_mass"],
+            self["mean_weighted_square_log_mass"],
+            n,
+        )
 
 
 def message(i: int, t: int, c: Member) -> Share:
@@ -596,12 +610,39 @@ def test_the_team_mass_is_the_information_weighted_mean(lossy):
         assert rho == pytest.approx(0.01 / math.sqrt(sum(info) / n), rel=1e-9)
     # A state that is no weighted mean of the fits yet is not used.
     assert team[0].team_mass(20.0) is None and team[0].team_mass(-1.0) is None
+    # The fits are further apart than their standard deviations say: chi-square about their
+    # weighted mean, over n − 1, and the team's interval widened by its square root.
+    chi2 = sum(
+        w * math.log(m / math.exp(_log_mean(info, fits))) ** 2 for w, (m, _) in zip(info, fits)
+    )
+    scale = math.sqrt(chi2 / 1e-4 / (n - 1))
+    assert scale > 1.5
+    for c in team.values():
+        assert c.disagreement(n) == pytest.approx(scale, rel=1e-6)
+
+
+def _log_mean(info, fits):
+    return sum(w * math.log(m) for w, (m, _) in zip(info, fits)) / sum(info)
+
+
+def test_fits_that_agree_leave_the_team_mass_interval_as_it_is() -> None:
+    log = math.log(5.0)
+    agreeing = (2.0, 2.0 * log, 2.0 * log * log)
+    assert disagreement(*agreeing, 4) == 1.0
+    assert disagreement(0.0, 0.0, 0.0, 4) == 1.0  # no fit yet
+    assert disagreement(1.0, log, log * log + 1e-4, 1) == 1.0  # a lone robot
+    # two robots 2 % apart with 1 % each: chi-square 2, S = sqrt(2)
+    a, b = math.log(4.95), math.log(5.05)
+    assert disagreement(1.0, (a + b) / 2, (a * a + b * b) / 2, 2) == pytest.approx(
+        math.sqrt(2.0) * (b - a) / 0.02, rel=1e-9
+    )
 
 
 def test_a_mass_fits_information_is_bounded() -> None:
-    assert mass_input(None, 0.1) == (0.0, 0.0) and mass_input(5.0, None) == (0.0, 0.0)
-    assert mass_input(5.0, 0.05) == pytest.approx((1.0, 5.0))  # 1 %: one unit
-    assert mass_input(5.0, 0.0) == (MAX_MASS_INFORMATION, 5.0 * MAX_MASS_INFORMATION)
+    assert mass_input(None, 0.1) == (0.0,) * 4 and mass_input(5.0, None) == (0.0,) * 4
+    log = math.log(5.0)
+    assert mass_input(5.0, 0.05) == pytest.approx((1.0, 5.0, log, log * log))  # 1 %: one unit
+    assert mass_input(5.0, 0.0)[:2] == (MAX_MASS_INFORMATION, 5.0 * MAX_MASS_INFORMATION)
     assert mass_input(5.0, 1e-6)[0] == MAX_MASS_INFORMATION
 
 
@@ -697,7 +738,7 @@ def test_centroid_consensus_adopts_each_neighbour_flow_once():
         degree=1,
         # x_j where this robot's x_i will be: the iteration's own term is nil.
         consensus=ConsensusState(centroid_offset=(0.5, -1.0), mean_square_offset=2.0),
-        flows=((0, 0.5, -1.0, 0.25, *[0.0] * 7),),
+        flows=((0, 0.5, -1.0, 0.25, *[0.0] * (flow_width() - 3)),),
         instant=t - 2,
     )
     c.update(phi, {1: theirs}, frame)

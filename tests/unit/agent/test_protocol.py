@@ -35,7 +35,7 @@ from agent.platform.protocol import (
     decode,
     encode,
 )
-from agent.platform.team import ConsensusState
+from agent.platform.team import ConsensusState, flow_width
 
 STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
 JSON_CLASSES = (Status, Truth, Control, PlantStatus, BridgeStatus, LoadGeometry)
@@ -103,8 +103,8 @@ SHARE_FLOWS = Share(
         mean_gain_square_offset=2.5,
     ),
     flows=(
-        (2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3, 4.0, 20.0, 1.5),
-        (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3, 0.0, -1.0, -0.25),
+        (2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3, 4.0, 20.0, 6.4, 10.2, 1.5),
+        (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3, 0.0, -1.0, 0.0, 0.0, -0.25),
     ),
 )
 CLOCK = Clock(tick=42, time_s=0.42)
@@ -311,6 +311,7 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
             switch_at=ticks,
             load_changes=st.integers(0, 10_000),
             rejoins=st.integers(0, 10_000),
+            levels=st.tuples(st.integers(0, 255), st.integers(0, 255)),
         ),
         consensus=st.builds(
             ConsensusState,
@@ -321,11 +322,13 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
             mean_gain_square_offset=numbers,
             mean_mass_information=numbers,
             mean_weighted_mass=numbers,
+            mean_weighted_log_mass=numbers,
+            mean_weighted_square_log_mass=numbers,
             mean_spin_torque=numbers,
             rotation=st.floats(-math.pi, math.pi),
             mean_turn_variance=st.floats(0.0, 100.0),
         ),
-        flows=st.lists(st.tuples(ids, *[numbers] * 10), max_size=8).map(tuple),
+        flows=st.lists(st.tuples(ids, *[numbers] * flow_width()), max_size=8).map(tuple),
     )
     maybe = lambda strategy: st.none() | strategy  # noqa: E731
     # (xx, ρ √(xx yy), yy): a covariance whenever xx, yy ≥ 0; anything, from anything.
@@ -418,7 +421,7 @@ DOMAIN_CASES = {
     "estimates with a negative drive gain": Estimates(1, 3, Phase.DONE, drive_gain=-1.0),
     "estimates with a negative gain std": Estimates(1, 3, Phase.DONE, drive_gain_std=-0.1),
     "share with more flows than neighbours": Share(
-        2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * 10), (3, *[0.0] * 10))
+        2, 3, (0.0, 0.0), 1, flows=((1, *[0.0] * flow_width()), (3, *[0.0] * flow_width()))
     ),
     "share centroid 1e5 m away": Share(
         2, 3, (0.0, 0.0), 1, consensus=ConsensusState(centroid_offset=(1e5, 0.0))
@@ -593,8 +596,10 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
         _with(SHARE_PLAIN, velocity=(bad, 0.0)),
         _with(SHARE_PLAIN, consensus=ConsensusState(mean_square_offset=bad)),
         _with(SHARE_CENTROID, consensus=ConsensusState(centroid_offset=(0.0, bad))),
-        _with(SHARE_FLOWS, flows=((2, 0.5, bad, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),)),
-        _with(SHARE_FLOWS, flows=((2, *[0.5] * 10), (4, *[0.0] * 9, bad))),
+        _with(SHARE_FLOWS, flows=((2, 0.5, bad, *[0.0] * (flow_width() - 2)),)),
+        _with(
+            SHARE_FLOWS, flows=((2, *[0.5] * flow_width()), (4, *[0.0] * (flow_width() - 1), bad))
+        ),
         _with(SHARE_FLOWS, consensus=ConsensusState(mean_gain=bad)),
         _with(SHARE_FLOWS, consensus=ConsensusState(mean_gain_offset=(0.0, bad))),
         _with(ESTIMATES_FULL, mass=bad),
@@ -610,8 +615,10 @@ def test_non_finite_numbers_in_struct_messages(bad: float) -> None:
 
 
 def test_share_flow_count_must_match_its_bytes() -> None:
-    payload = encode(SHARE_FLOWS)  # two flows of 82 bytes each, the count in the last fixed byte
-    flow = struct.calcsize("<H10d")
+    payload = encode(
+        SHARE_FLOWS
+    )  # two flows of 2 + 8 flow_width() bytes each, the count in the last fixed byte
+    flow = struct.calcsize(f"<H{flow_width()}d")
     fixed = len(payload) - 2 * flow
     assert payload[fixed - 1] == 2
     rejects(Share, payload[:-flow])  # one flow's bytes, count 2

@@ -71,7 +71,7 @@ def inputs_with_temperature(robot: int):
 
     def inputs(x):
         norm2 = x[0] * x[0] + x[1] * x[1]
-        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, TEMPERATURES[robot])
+        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, TEMPERATURES[robot])
 
     return inputs
 
@@ -104,7 +104,16 @@ def run_team(ticks: int, drop: float = 0.0, seed: int = 1) -> dict[int, TeamCons
 
 def test_a_new_quantity_crosses_the_wire_and_is_checked() -> None:
     state = consensus_state_type(EXTENDED)(centroid_offset=(0.5, -0.25), mean_temperature=23.5)
-    share = Share(3, 9, (0.1, 0.0), 2, 8, Barrier(Phase.INERTIA, 5, 12), state, ((2, *[0.5] * 11),))
+    share = Share(
+        3,
+        9,
+        (0.1, 0.0),
+        2,
+        8,
+        Barrier(Phase.INERTIA, 5, 12),
+        state,
+        ((2, *[0.5] * flow_width(EXTENDED)),),
+    )
     assert flow_width(EXTENDED) == flow_width() + 1  # a flow-form mean: one more flow number
     assert WIRE.unpack(WIRE.pack(share)) == share
     WIRE.check(share)
