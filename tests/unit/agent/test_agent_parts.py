@@ -388,6 +388,36 @@ def test_the_translating_push_acts_through_the_estimated_com_and_damps_the_turn(
     assert torque == pytest.approx(-b * omega * w, rel=1e-9)
 
 
+def test_the_translating_push_keeps_its_common_force_whole_within_max_force():
+    """Where ``max_force`` cannot give the common force and the torque's forces both, the
+    common force (which Step 7's fit takes as commanded) is applied whole, the torque's
+    forces scaled down to what is left."""
+    z, z_c, most = (-0.9, 0.1), (0.3, -0.2), 3.2
+    m = machine(
+        estimator=Estimators.ROBUST,
+        max_force=most,
+        push_force=2.0,
+        push_damping=2.0,
+        push_direction=(0.0, 1.0),
+        spin_up_s=0.0,
+        pendulum_s=0.1,
+        translate_brake_s=0.1,
+    )
+    own = Own(moment=1.0, omega=0.0, centroid=z, instant=49, mean_square_offset=0.4)
+    enter(m, Phase.PUSH, 50, own)
+    k = 50 + m.translate_from
+    own.instant, own.omega, own.com_offset_now, own.velocity = k - 1, 0.5, z_c, (0.0, 0.0)
+    force = m.force(k, own, own.velocity)
+    damping = m.mean_push_damping(k, k + 1)
+    common = (damping[0], m.push_sign(k) * 2.0 + damping[1])
+    assert damping == pytest.approx((-2.0 * 0.5 * z[1], 2.0 * 0.5 * z[0]))  # −b ṗ̂_G, whole
+    assert math.hypot(*force) == pytest.approx(most)
+    turning = (force[0] - common[0], force[1] - common[1])
+    assert math.hypot(*turning) > 0.1
+    turned = rotate(z, 0.5 * 1.5 * DT)  # z_i at the middle of tick k
+    assert turned[0] * turning[0] + turned[1] * turning[1] == pytest.approx(0.0, abs=1e-12)
+
+
 def test_done_brakes_and_halted_applies_no_force():
     m = machine()
     enter(m, Phase.DONE, 5, Own())
