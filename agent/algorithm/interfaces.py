@@ -63,6 +63,11 @@ class OwnEstimates(Protocol):
         its standard deviation (N m; ``None``: not estimated)."""
         ...
 
+    @property
+    def com_offset_now(self) -> Vec2 | None:
+        """``z_C`` (Step 5) at the estimation instant (``None`` before the push)."""
+        ...
+
     def settled(self, phase: Phase) -> bool:
         """Whether the estimates that ``phase`` is for have settled (excite: Steps 1–3 and
         ``w``; inertia: ``Ĵ``; push: ``z_C`` and ``m̂``)."""

@@ -140,6 +140,11 @@ class EstimationPipeline:
         """``(τ̂_c, σ)``: the floor's friction torque (``None``: the family estimates none)."""
         return None
 
+    @property
+    def com_offset_now(self) -> Vec2 | None:
+        """``z_C`` (Step 5) at the estimation instant (``None`` before the push)."""
+        return self.com_offset(self.angle - self.push_angle)
+
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C`` after the rotation ``alpha`` since the push began (Step 5)."""
         return self.com.com_offset(alpha) if self.com is not None else None

@@ -28,7 +28,10 @@
   z_i⊥`` (eq. 14's form: no net force, torque ``s_ω τ̂_c``, ``τ̂_c`` Step 4's estimate when
   the push began), so that Step 5's stage sees a load that turns fast compared with its COM's
   speed, where friction is a torque alone to first order (docs/estimator.md, "On a real floor:
-  friction"); the push runs in stages (:meth:`_push_stage`), Step 7's in translation; with
+  friction"); the push runs in stages (:meth:`_push_stage`), Step 7's in translation, where
+  the torque ``−n ẑ_C × c`` makes the common force ``c`` act through the COM that Step 5
+  found rather than the contacts' centroid, and the turn is damped
+  (:meth:`RobustPhases._not_turning`); with
   ``push_damping = b`` each robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity
   at the estimation instant (which every robot estimates alike), so that a light load's speed
   stays within about ``f/b`` and a heavy one's drift dies out (Steps 5 and 7 take the force as
@@ -289,9 +292,7 @@ class RobustPhases(PhaseMachine):
         push = (sign * self.push[0], sign * self.push[1])
         if stage == 0:
             return self._pushing(k, own, velocity, push)
-        b = self.tuning.robust.turn_damping
-        damp = inertia_force(-b * (own.omega or 0.0), self._turned_centroid(k, own))
-        return self._pushing(k, own, velocity, (push[0] + damp[0], push[1] + damp[1]), keep=False)
+        return self._pushing(k, own, velocity, push, keep=False)
 
     def _spin_up(self, k: int, own: OwnEstimates) -> Vec2:
         """The torque ``s_ω (τ̂_c + Ĵ (ω* − |ω̂|) / spin_up_s)`` as eq. (14)'s forces, within
@@ -309,8 +310,11 @@ class RobustPhases(PhaseMachine):
 
     def _turned_centroid(self, k: int, own: OwnEstimates) -> Vec2:
         """``z_i`` turned to the middle of tick ``k``."""
-        lead = (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
-        return rotate(own.centroid, lead)
+        return rotate(own.centroid, self._lead(k, own))
+
+    def _lead(self, k: int, own: OwnEstimates) -> float:
+        """The load's turn from the estimation instant to the middle of tick ``k`` (rad)."""
+        return (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
 
     def _first_push_sign(self) -> float:
         return -1.0 if self.load_changes % 2 else 1.0
@@ -318,25 +322,55 @@ class RobustPhases(PhaseMachine):
     def _pushing(
         self, k: int, own: OwnEstimates, velocity: Vec2, push: Vec2, keep: bool = True
     ) -> Vec2:
-        """The push with the torque against friction (with ``keep``) and ``push_damping``'s
-        ``−b ṗ̂_G`` added (the damping recorded for Steps 5 and 7)."""
-        if keep:
-            turning = self._keep_turning(k, own)
-            push = (push[0] + turning[0], push[1] + turning[1])
+        """The push with the torque against friction (with ``keep``; else Step 7's,
+        :meth:`_not_turning`) and ``push_damping``'s ``−b ṗ̂_G`` added (the damping recorded
+        for Steps 5 and 7). In Step 7's stage the common force, which the fit takes as
+        commanded, is applied whole within ``max_force``, and the torque's forces take what it
+        leaves (scaled down together: a generated load pushed at 9.5 N a robot under
+        ``max_force`` = 10 N had its common force cut at every tick, m̂ 4 % off)."""
         b = self.tuning.robust.push_damping
-        if not b > 0.0 or own.velocity is None:
+        damped = b > 0.0 and own.velocity is not None
+        damping = (0.0, 0.0)
+        if damped:
+            # ṗ_G = ṗ_Ci − ω Q z_i, all three at the estimation instant: every robot then adds
+            # the same force, as Steps 5 and 7 take it. (This tick's ṗ_Ci with the instant's ω
+            # would differ from robot to robot by the change of ω times z_i, a torque the fits
+            # miss.)
+            omega, v, z = own.omega or 0.0, own.velocity, own.centroid
+            damping = (-b * (v[0] + omega * z[1]), -b * (v[1] - omega * z[0]))
+        most = self.tuning.max_force
+        if not keep:  # the common force first, the torque within what max_force leaves
+            common = saturate((push[0] + damping[0], push[1] + damping[1]), most)
+            if damped:
+                self._damping[k] = (common[0] - push[0], common[1] - push[1])
+            turning = self._not_turning(k, own, common)
+            part = _within(common, turning, most)
+            return (common[0] + part * turning[0], common[1] + part * turning[1])
+        turning = self._keep_turning(k, own)
+        push = (push[0] + turning[0], push[1] + turning[1])
+        if not damped:
             return push
-        # ṗ_G = ṗ_Ci − ω Q z_i, all three at the estimation instant: every robot then adds the
-        # same force, as Steps 5 and 7 take it. (This tick's ṗ_Ci with the instant's ω would
-        # differ from robot to robot by the change of ω times z_i, a torque the fits miss.)
-        omega, v, z = own.omega or 0.0, own.velocity, own.centroid
-        centroid_velocity = (v[0] + omega * z[1], v[1] - omega * z[0])
-        force = saturate(
-            (push[0] - b * centroid_velocity[0], push[1] - b * centroid_velocity[1]),
-            self.tuning.max_force,
-        )
+        force = saturate((push[0] + damping[0], push[1] + damping[1]), most)
         self._damping[k] = (force[0] - push[0], force[1] - push[1])
         return force
+
+    def _not_turning(self, k: int, own: OwnEstimates, common: Vec2) -> Vec2:
+        """Step 7's stage: ``(τ/w) z_i⊥`` (eq. 14's form, no net force) with
+        ``τ = −n ẑ_C × c − b ω̂ w``: the team's common force ``c`` (the push and its damping),
+        which acts at the contacts' centroid, ``n ẑ_C × c`` about the COM, then acts through the
+        COM that Step 5 found, and ``turn_damping = b`` damps what turn is left, so that the
+        load translates (``z_i`` and ``ẑ_C`` turned to the middle of tick ``k``)."""
+        w = self.n * own.mean_square_offset
+        if not w > 0.0:
+            return (0.0, 0.0)
+        z_c = own.com_offset_now
+        push_torque = 0.0
+        if z_c is not None:
+            z_c = rotate(z_c, self._lead(k, own))
+            push_torque = self.n * (z_c[0] * common[1] - z_c[1] * common[0])
+        b = self.tuning.robust.turn_damping
+        gain = -b * (own.omega or 0.0) - push_torque / w
+        return inertia_force(gain, self._turned_centroid(k, own))
 
     def _keep_turning(self, k: int, own: OwnEstimates) -> Vec2:
         """``s_ω (τ̂_c / w) z_i⊥``, ``z_i`` turned to the middle of tick ``k``: the team's torque
@@ -388,6 +422,16 @@ class RobustPhases(PhaseMachine):
         b = self.tuning.brake_gain
         spin = self._spin_up(k, own)
         return (-b * v[0] + spin[0], -b * v[1] + spin[1])
+
+
+def _within(base: Vec2, extra: Vec2, most: float) -> float:
+    """The largest ``a`` in [0, 1] with ``‖base + a extra‖ ≤ most`` (``‖base‖ ≤ most``)."""
+    ee = extra[0] * extra[0] + extra[1] * extra[1]
+    be = base[0] * extra[0] + base[1] * extra[1]
+    room = most * most - base[0] * base[0] - base[1] * base[1]
+    if ee + 2.0 * be <= room:
+        return 1.0
+    return max(0.0, min(1.0, (-be + math.sqrt(max(be * be + ee * room, 0.0))) / ee))
 
 
 def _changed(k: int, own: OwnEstimates) -> bool:

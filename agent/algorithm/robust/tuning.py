@@ -60,7 +60,8 @@ class RobustTuning:
     load stops turning before it is pushed in translation (Step 7's stage)."""
     turn_damping: float = bounded(4.0, 0, 1000, "N s/m")
     """N s/m: in Step 7's stage each robot adds ``−b ω̂ z_i⊥`` (torque ``−b ω̂ w``, no net
-    force): the push's torque about the COM then turns the load little, so that every support
+    force) beside the torque that moves the common force's line of action from the contacts'
+    centroid to the COM that Step 5 found: the load then translates, so that every support
     moves with the COM and friction's force is ``−μ m g v̂_C`` exactly."""
     push_damping: float = bounded(2.0, 0, 1000, "N s/m")
     """N s/m: each robot adds ``−b ṗ̂_G`` to the push (the centroid's velocity, which every

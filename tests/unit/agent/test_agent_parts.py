@@ -115,6 +115,7 @@ class Own:
     moment: float | None = None
     friction_torque: tuple[float, float] | None = None
     com_velocity: Vec2 | None = None
+    com_offset_now: Vec2 | None = None
     stuck: bool = False
     changed: bool = False
 
@@ -345,6 +346,76 @@ def test_the_robust_push_damps_the_centroids_velocity_and_says_by_how_much():
     paper = machine(push_damping=2.0, push_min_force=2.0, push_direction=(0.0, 1.0))
     enter(paper, Phase.PUSH, 50, own)
     assert paper.force(50, own, (0.1, 0.2)) == pytest.approx((0.0, 2.0))  # robust only
+
+
+def test_the_translating_push_acts_through_the_estimated_com_and_damps_the_turn():
+    """Step 7's stage: the team's common force (the push and its damping) acts at the
+    contacts' centroid; each robot adds ``(τ/w) z_i⊥``, ``τ = −n ẑ_C × c − b ω̂ w``, so that
+    the team's wrench about the COM that Step 5 found is the common force and the turn's
+    damping alone, whatever ``ẑ_C``."""
+    n, z_c, omega, b = 3, (0.3, -0.2), 0.4, 4.0
+    centroids = [(0.9, 0.1), (-0.5, 0.6), (-0.4, -0.7)]  # Σ z_i = 0
+    w = sum(x * x + y * y for x, y in centroids)
+    forces = []
+    for robot, z in enumerate(centroids, start=1):
+        m = machine(
+            robot=robot,
+            n=n,
+            estimator=Estimators.ROBUST,
+            push_force=2.0,
+            push_damping=2.0,
+            turn_damping=b,
+            push_direction=(0.0, 1.0),
+            spin_up_s=0.0,
+            pendulum_s=0.1,
+            translate_brake_s=0.1,
+        )
+        own = Own(moment=1.0, omega=0.0, centroid=z, instant=49, mean_square_offset=w / n)
+        enter(m, Phase.PUSH, 50, own)
+        k = 50 + m.translate_from
+        assert m._push_stage(k) == 2
+        own.instant, own.omega, own.com_offset_now = k - 1, omega, z_c
+        # the COM's velocity (0, 0.1): ṗ_Ci = ṗ_C + ω Q (z_i + z_C)
+        own.velocity = (-omega * (z[1] + z_c[1]), 0.1 + omega * (z[0] + z_c[0]))
+        lead = omega * 1.5 * DT  # z_i and ẑ_C turned to the middle of tick k
+        forces.append((rotate(z, lead), m.force(k, own, own.velocity)))
+        # the common force: the push, and −b ṗ̂_G with ṗ̂_G = ṗ_C + ω Q z_C
+        common = (2.0 * omega * z_c[1], m.push_sign(k) * 2.0 - 2.0 * (0.1 + omega * z_c[0]))
+    arm = rotate(z_c, lead)
+    net = (sum(f[0] for _, f in forces), sum(f[1] for _, f in forces))
+    torque = sum(cross((z[0] + arm[0], z[1] + arm[1]), f) for z, f in forces)
+    assert net == pytest.approx((n * common[0], n * common[1]), abs=1e-12)
+    assert torque == pytest.approx(-b * omega * w, rel=1e-9)
+
+
+def test_the_translating_push_keeps_its_common_force_whole_within_max_force():
+    """Where ``max_force`` cannot give the common force and the torque's forces both, the
+    common force (which Step 7's fit takes as commanded) is applied whole, the torque's
+    forces scaled down to what is left."""
+    z, z_c, most = (-0.9, 0.1), (0.3, -0.2), 3.2
+    m = machine(
+        estimator=Estimators.ROBUST,
+        max_force=most,
+        push_force=2.0,
+        push_damping=2.0,
+        push_direction=(0.0, 1.0),
+        spin_up_s=0.0,
+        pendulum_s=0.1,
+        translate_brake_s=0.1,
+    )
+    own = Own(moment=1.0, omega=0.0, centroid=z, instant=49, mean_square_offset=0.4)
+    enter(m, Phase.PUSH, 50, own)
+    k = 50 + m.translate_from
+    own.instant, own.omega, own.com_offset_now, own.velocity = k - 1, 0.5, z_c, (0.0, 0.0)
+    force = m.force(k, own, own.velocity)
+    damping = m.mean_push_damping(k, k + 1)
+    common = (damping[0], m.push_sign(k) * 2.0 + damping[1])
+    assert damping == pytest.approx((-2.0 * 0.5 * z[1], 2.0 * 0.5 * z[0]))  # −b ṗ̂_G, whole
+    assert math.hypot(*force) == pytest.approx(most)
+    turning = (force[0] - common[0], force[1] - common[1])
+    assert math.hypot(*turning) > 0.1
+    turned = rotate(z, 0.5 * 1.5 * DT)  # z_i at the middle of tick k
+    assert turned[0] * turning[0] + turned[1] * turning[1] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_done_brakes_and_halted_applies_no_force():
