@@ -19,7 +19,8 @@
   barrier;
 - *inertia*: the robots' ω differ by their noise, so rather than reverse on ``|ω|`` the torque
   speeds up for ``inertia_flip_s`` and brakes for as long (with ``inertia_brake_level`` of it:
-  the floor's friction brakes too), in turn, from the agreed tick on
+  the floor's friction brakes too), in turn, from the agreed tick on, fading as the turn nears
+  ``max_turn_rate`` in the torque's direction (:meth:`RobustPhases._turn_room`)
   (after braking first for ``inertia_brake_s``: with half a flip, ω swings about the turn the
   load had, by half of what speeding up first adds to it, which keeps a compact, light load's
   turn on its floor);
@@ -86,6 +87,11 @@ PUSH_FRICTION_MARGIN = 3.0
 friction force, taken as ``τ̂₁ / r`` with ``r = √(w/n)`` the contacts' root-mean-square
 distance from their centroid (the supports' friction radius ``c`` is less for a load pushed at
 its rim): the translation of Step 7's stage then slides the load, with a speed that grows."""
+TURN_RATE_TAPER = 0.25
+"""Step 4's torque is whole while the load turns slower than ``1 − TURN_RATE_TAPER`` of
+``max_turn_rate`` in the torque's own direction, and none at ``max_turn_rate``: every robot's
+``ω̂`` is the team's (:mod:`agent.algorithm.robust.rotation`), so the robots fade their torques
+alike, and each records the torque it assumes the team applied."""
 LEVELS_PER_DOUBLING = 4
 """Step 4's ``F`` and the push's ``f`` are their settings times ``2^(q/4)``, ``q`` the level
 the team agreed on (the largest any robot asked for, :mod:`agent.algorithm.coordination`):
@@ -246,7 +252,16 @@ class RobustPhases(PhaseMachine):
         agreed tick on: every robot takes the same decisions whatever the noise on its ω."""
         since = k - self.since - self.brake_ticks
         flips = since // max(1, self.flip_ticks)
-        return 1.0 if since >= 0 and flips % 2 == 0 else -self.brake_level
+        direction = 1.0 if since >= 0 and flips % 2 == 0 else -self.brake_level
+        along = math.copysign(1.0, direction) * self.spin_sign * (own.omega or 0.0)
+        return direction * self._turn_room(along)
+
+    def _turn_room(self, along: float) -> float:
+        """The share of Step 4's torque applied while the load turns at ``along`` rad/s in
+        the torque's direction: 1 up to ``1 − TURN_RATE_TAPER`` of ``max_turn_rate``, falling
+        linearly to 0 at it (:data:`TURN_RATE_TAPER`)."""
+        most = self.tuning.robust.max_turn_rate
+        return min(max((most - along) / (TURN_RATE_TAPER * most), 0.0), 1.0)
 
     def _push_magnitude(self, moment: float) -> float:
         return self.tuning.robust.push_force * self.push_level

@@ -28,6 +28,11 @@ class RobustTuning:
     whose friction torque brakes the turn all the while, equal levels would stop the load
     within a few flips; below 1 the turn keeps up (a frictionless load's turn grows by
     ``(1 − this) k w T / 2J`` a flip). 1: the paper's symmetric torque."""
+    max_turn_rate: float = bounded(1.8, 0, 100, "rad/s", open_low=True)
+    """rad/s: Step 4's torque fades (linearly, over the last :data:`~agent.algorithm.robust.
+    phases.TURN_RATE_TAPER` of it) as the load's turn ``|ω̂|`` nears this, either way: a light
+    load under the team's torque would otherwise turn faster every flip (a generated load of
+    J = 2.9 kg m² under 8.7 N m turned at 3.3 rad/s), beyond what its floor allows."""
     breakaway_speed: float = bounded(0.05, 0, 10, "m/s", open_low=True)
     """m/s: Step 1's kick grows (doubling every ``kick_duration_s``, up to ``max_force``) until
     the robot's contact, or its speed relative to a neighbour's, filtered over
