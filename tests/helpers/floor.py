@@ -23,3 +23,31 @@ FLOOR = Truth(
 )
 """Two robots on a 5 kg load at rest, at tick 10 (0.1 s), on a floor of μ = 2 % whose supports
 are 1.5 m from the COM on average: a spin meets ``μ m g c`` = 1.4715 N m."""
+
+
+def generated_on_floor(seed: int, max_time_s: float = 30.0):
+    """``(scenario, μ, μ_s)``: generated load ``seed`` as the noise benchmark runs it on floors
+    (``heft bench noise --generated N --coulomb-range 0.005 0.03``): its sensors' noise, its
+    drives, the robust estimators with the generated loads' settings, its seed's floor."""
+    import dataclasses
+
+    from agent.algorithm.tuning import Estimators
+    from simulator.bench.floor import FloorSettings, on_floor
+    from simulator.bench.noise import (
+        GENERATED_INERTIA_BRAKE_S,
+        GENERATED_PUSH_DAMPING,
+        NoiseSettings,
+        noisy,
+    )
+    from simulator.generate import generate_scenario
+
+    settings = dataclasses.replace(
+        NoiseSettings(),
+        push_damping=GENERATED_PUSH_DAMPING,
+        inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
+        max_time_s=max_time_s,
+    )
+    scenario = noisy(generate_scenario(seed), settings, seed, Estimators.ROBUST)
+    mu, mu_s = FloorSettings((0.005, 0.03)).draw(seed)
+    scenario, _ = on_floor(scenario, mu, mu_s)
+    return scenario, mu, mu_s

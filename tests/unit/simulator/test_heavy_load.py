@@ -5,33 +5,16 @@ and Step 4's torque and the push are sized against the friction torque the spin-
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
-from agent.algorithm.tuning import Estimators
-from simulator.bench.floor import FloorSettings, on_floor
-from simulator.bench.noise import (
-    GENERATED_INERTIA_BRAKE_S,
-    GENERATED_PUSH_DAMPING,
-    NoiseSettings,
-    noisy,
-)
-from simulator.generate import generate_scenario
 from simulator.inprocess import run_inprocess
+from tests.helpers.floor import generated_on_floor
 
 SEED = 2
 
 
 def test_a_heavy_load_the_first_kick_cannot_move_is_estimated() -> None:
-    settings = dataclasses.replace(
-        NoiseSettings(),
-        push_damping=GENERATED_PUSH_DAMPING,
-        inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
-        max_time_s=30.0,
-    )
-    scenario = noisy(generate_scenario(SEED), settings, SEED, Estimators.ROBUST)
-    mu, mu_s = FloorSettings((0.005, 0.03)).draw(SEED)
-    scenario, _ = on_floor(scenario, mu, mu_s)
+    scenario, mu, mu_s = generated_on_floor(SEED)
     truth = scenario.body
     assert mu_s * truth.mass * 9.81 > scenario.n * scenario.agent.kick_force  # held at first
     outcome = run_inprocess(scenario)

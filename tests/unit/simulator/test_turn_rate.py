@@ -6,33 +6,17 @@ COM 26 cm off (m̂ 28 % off with it); the torque now fades as the turn nears ``m
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
-from agent.algorithm.tuning import Estimators
 from agent.platform.protocol import Phase
-from simulator.bench.floor import FloorSettings, on_floor
-from simulator.bench.noise import (
-    GENERATED_INERTIA_BRAKE_S,
-    GENERATED_PUSH_DAMPING,
-    NoiseSettings,
-    noisy,
-)
-from simulator.generate import generate_scenario
 from simulator.inprocess import run_inprocess
+from tests.helpers.floor import generated_on_floor
 
 SEED = 11
 
 
 def test_step_4_keeps_a_light_load_within_the_turn_rate() -> None:
-    settings = dataclasses.replace(
-        NoiseSettings(),
-        push_damping=GENERATED_PUSH_DAMPING,
-        inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
-        max_time_s=30.0,
-    )
-    scenario = noisy(generate_scenario(SEED), settings, SEED, Estimators.ROBUST)
-    scenario, _ = on_floor(scenario, *FloorSettings((0.005, 0.03)).draw(SEED))
+    scenario, _, _ = generated_on_floor(SEED)
     most = scenario.agent.robust.max_turn_rate
     turns = []
 
