@@ -127,6 +127,7 @@ class SupportFriction:
         friction changes its speed in a step, so it comes to rest without overshooting."""
         moments = self._moments
         s = moments.dot((vx * vx + vy * vy, 2.0 * w * vy, -2.0 * w * vx, w * w))
+        np.maximum(s, 0.0, out=s)  # ‖u_k‖² of a support at rest may round below 0
         np.sqrt(s, out=s)
         np.maximum(s, self.creep, out=s)
         np.divide(self._limits, s, out=s)

@@ -321,3 +321,15 @@ def test_a_load_change_moves_the_normal_loads() -> None:
     assert after.friction_radius == loads.friction_radius != before
     assert after.viscous_radius2 == loads.viscous_radius2
     assert sum(loads.normal) == pytest.approx(6.0 * GRAVITY)
+
+
+def test_a_support_at_rest_in_a_turn_gets_a_finite_force() -> None:
+    """The load turning about one support: that support's ``‖u_k‖²``, summed from its four
+    terms, rounds below 0 here (its square root was NaN, and so was the wrench the plant then
+    applied: a generated load that the kick could have moved was found held)."""
+    arm = (-0.9433050469559874, 0.6715302078397394)
+    w = -0.40339759256967955
+    supports = SupportFriction([arm, (0.5, 0.5), (-0.5, 0.2)], [1.0, 1.0, 1.0], creep=1e-6)
+    wrench = supports.coulomb(w * arm[1], -w * arm[0], w)
+    assert all(math.isfinite(c) for c in wrench)
+    assert supports.coulomb(0.0, 0.0, 0.0) == (0.0, 0.0, 0.0)
