@@ -23,6 +23,7 @@ from agent.algorithm.families import FAMILIES
 from agent.algorithm.inbox import HISTORY_TICKS, Inbox
 from agent.algorithm.paper.tuning import PaperTuning
 from agent.algorithm.phase_machine import PhaseMachine
+from agent.algorithm.robust.phases import TURN_STOP_SHARE
 from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import PAPER_REFERENCE, AgentConfig, AgentTuning, Estimators
 from agent.platform.config import from_table
@@ -396,7 +397,7 @@ def test_the_translating_push_keeps_its_common_force_whole_within_max_force():
     m = machine(
         estimator=Estimators.ROBUST,
         max_force=most,
-        push_force=2.0,
+        push_force=1.6,  # at most half of max_force (PUSH_HEADROOM)
         push_damping=2.0,
         push_direction=(0.0, 1.0),
         spin_up_s=0.0,
@@ -406,15 +407,16 @@ def test_the_translating_push_keeps_its_common_force_whole_within_max_force():
     own = Own(moment=1.0, omega=0.0, centroid=z, instant=49, mean_square_offset=0.4)
     enter(m, Phase.PUSH, 50, own)
     k = 50 + m.translate_from
-    own.instant, own.omega, own.com_offset_now, own.velocity = k - 1, 0.5, z_c, (0.0, 0.0)
+    omega = 1.5
+    own.instant, own.omega, own.com_offset_now, own.velocity = k - 1, omega, z_c, (0.0, 0.0)
     force = m.force(k, own, own.velocity)
     damping = m.mean_push_damping(k, k + 1)
-    common = (damping[0], m.push_sign(k) * 2.0 + damping[1])
-    assert damping == pytest.approx((-2.0 * 0.5 * z[1], 2.0 * 0.5 * z[0]))  # −b ṗ̂_G, whole
+    common = (damping[0], m.push_sign(k) * 1.6 + damping[1])
+    assert damping == pytest.approx((-2.0 * omega * z[1], 2.0 * omega * z[0]))  # −b ṗ̂_G, whole
     assert math.hypot(*force) == pytest.approx(most)
     turning = (force[0] - common[0], force[1] - common[1])
     assert math.hypot(*turning) > 0.1
-    turned = rotate(z, 0.5 * 1.5 * DT)  # z_i at the middle of tick k
+    turned = rotate(z, omega * 1.5 * DT)  # z_i at the middle of tick k
     assert turned[0] * turning[0] + turned[1] * turning[1] == pytest.approx(0.0, abs=1e-12)
 
 
@@ -572,3 +574,28 @@ def test_the_resend_timeout_follows_the_pace_within_its_bounds():
     for _ in range(50):
         slow.observe(30.0)
     assert slow.timeout_s == 5.0
+
+
+def test_the_brake_before_the_translation_stops_the_turn_within_step_4s_torque():
+    """Between Step 5's stage and Step 7's, each robot adds the torque ``−Ĵ ω̂ / τ_s``
+    (``τ_s`` a fifth of ``translate_brake_s``) as eq. (14)'s forces, at most Step 4's torque:
+    the contacts' brake alone, ``−b ṗ_Ci``, left a heavy load turning while it translated."""
+    z = (-0.9, 0.1)
+    m = machine(estimator=Estimators.ROBUST, spin_up_s=0.0, pendulum_s=0.1, translate_brake_s=1.0)
+    own = Own(moment=2.0, omega=0.0, centroid=z, instant=49, mean_square_offset=0.4)
+    enter(m, Phase.INERTIA, 40, own)
+    enter(m, Phase.PUSH, 50, own)
+    k = 50 + m.pendulum_ticks
+    assert m._push_stage(k) == 1
+    w = m.n * own.mean_square_offset
+    for omega in (0.05, -0.05, 3.0):
+        own.instant, own.omega = k - 1, omega
+        force = m.force(k, own, (0.0, 0.0))  # the contact still: no brake force
+        turned = rotate(z, omega * 1.5 * DT)
+        torque = (
+            (turned[0] * force[1] - turned[1] * force[0]) * w / (turned[0] ** 2 + turned[1] ** 2)
+        )
+        wanted = -2.0 * omega / (TURN_STOP_SHARE * 1.0)
+        most = abs(m.inertia_torque)
+        assert torque == pytest.approx(min(max(wanted, -most), most))
+    assert abs(-2.0 * 3.0 / 0.2) > abs(m.inertia_torque)  # the last was bounded
