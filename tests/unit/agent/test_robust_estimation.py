@@ -68,11 +68,11 @@ def test_least_squares_forgetting_follows_a_change() -> None:
 
 
 def _dot(pairs) -> float:
-    """``Σ a·b``, term by term from 0.0."""
-    total = 0.0
+    """``Σ a·b``, term by term from the first (0.0 for none)."""
+    total = None
     for a, b in pairs:
-        total += a * b
-    return total
+        total = a * b if total is None else total + a * b
+    return 0.0 if total is None else total
 
 
 def _solved_by_loops(m: list[float], v: list[float], p: int):
