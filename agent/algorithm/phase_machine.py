@@ -289,21 +289,28 @@ class PhaseMachine:
     def mean_push_damping(self, first: int, last: int) -> Vec2:
         """The mean of what each robot added to the common force over ticks ``first..last − 1``
         (zero unless the family damps the push)."""
-        added = [self._damping.get(t, (0.0, 0.0)) for t in range(first, last)]
-        return (
-            sum(a[0] for a in added) / len(added),
-            sum(a[1] for a in added) / len(added),
-        )
+        damping, none = self._damping, (0.0, 0.0)
+        x = y = 0.0  # each sum from 0.0, term by term (as ``sum`` adds floats up to 3.11)
+        for t in range(first, last):
+            a = damping.get(t, none)
+            x += a[0]
+            y += a[1]
+        return (x / (last - first), y / (last - first))
 
     def mean_push_sign(self, first: int, last: int) -> float:
         """The mean sign of the common force over ticks ``first..last − 1`` (Steps 5–7's
         input over an interval)."""
-        return sum(self.push_sign(t) for t in range(first, last)) / (last - first)
+        total = 0.0
+        for t in range(first, last):
+            total += self.push_sign(t)
+        return total / (last - first)
 
     def mean_torque(self, first: int, last: int) -> float:
         """The team's mean torque (Step 4's input ``±k w``) over ticks ``first..last − 1``."""
-        torques = [self._torque.get(t, 0.0) for t in range(first, last)]
-        return sum(torques) / len(torques)
+        torque, total = self._torque, 0.0
+        for t in range(first, last):
+            total += torque.get(t, 0.0)
+        return total / (last - first)
 
     def forget(self, before: int) -> None:
         """Drop the torque and the damping of tick ``before`` (too old to be asked for)."""

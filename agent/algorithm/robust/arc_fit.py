@@ -41,6 +41,9 @@ relative velocity's noise variance per axis, measured from the samples' second d
 The circle is determined once the arc is long enough: :attr:`estimate` is ``None`` until the
 fitted radius is known to within half of itself. Sums are kept with an optional exponential
 forgetting, O(1) per sample (:class:`~agent.algorithm.robust.least_squares.LeastSquares`).
+Every sample adds its row; once the circle is determined it is solved again every
+:data:`SOLVE_EVERY` samples (a 3 × 3 inverse and the radius' variance), the last solve's
+centre and radius standing in between.
 """
 
 from __future__ import annotations
@@ -63,6 +66,12 @@ seeds 0–39; each edge's 95 % ellipse without ``PUBLISHED_VARIANCE``, the facto
 alone). On 2026-11-27 it printed 1.19 for 95 % of the edges inside (1.27 for 95 % of the
 robots with all their edges inside; with 1.5, 97.5 % and 96.2 %); with ``--ideal-drives``,
 1.13 and 1.25."""
+SOLVE_EVERY = 4
+"""Samples between two solves of a determined circle. A turn between two samples is measured
+about one centre at both ends, so a centre held for a few samples loses no turn and counts none
+twice; and a few more rows move the fit by little: on ``paper-noisy.toml`` (seeds 0–2) the
+centre moved over 4 samples by a median 0.5 % of its standard deviation (99 % of the times
+under 12 %; about one standard deviation at most, on the circle's first samples)."""
 CORRELATION = 2.5
 """Factor on ``N σ̂² (AᵀA)⁻¹``, the covariance of the centre and of the radius. Set on
 simulated arcs (‖z‖ = 1.5 m, ω = 0.3 ± 0.2 rad/s, 100 Hz, σ from 1 mm/s to 3 cm/s, 40 seeds,
@@ -106,47 +115,54 @@ class ArcRelativePosition:
         """``σ_e²``: the relative velocity's noise variance per axis (m²/s²), measured (0 until
         a second difference is)."""
         self._solution: Solution | None = None
-        """The fit after the last sample used, once it determines the circle."""
-        self._distance: float | None = None
-        """``‖z_ij‖`` from :attr:`_solution`."""
-        self._distance_std: float | None = None
-        """Its standard deviation."""
+        """The fit at its last solve, once it determines the circle."""
+        self._unsolved = 0
+        """Samples added since that solve."""
+        self.distance: float | None = None
+        """``‖z_ij‖ = √(d + ‖c‖²)``, the fitted radius (``None`` until the circle is
+        determined)."""
+        self.distance_std: float | None = None
+        """The standard deviation (m) of :attr:`distance`: the fit's, through
+        ``∂r/∂p = (c_x/r, c_y/r, 1/(2r))``, scaled by ``N`` and :data:`CORRELATION`."""
         self._last_estimate: tuple = (None, None, None)
         """``(r̂, ψ̂, z_ij)`` of the last :attr:`estimate` made."""
 
     def update(self, zdot: Vec2, dt: float, *, follow: bool = True) -> None:
         """Feed ``ż_ij`` sampled ``dt`` after the last sample used."""
-        if math.hypot(zdot[0], zdot[1]) <= self.min_speed:
+        zx, zy = zdot
+        if math.hypot(zx, zy) <= self.min_speed:
             self.moving = False
             return
         self.moving = True
-        if self.zdot is None:
+        last = self.zdot
+        if last is None:
             self.zdot = zdot
             self._add(self.s)
             return
-        before = self.s
+        bx, by = self.s
         h = 0.5 * dt
-        sx = self.s[0] + h * (self.zdot[0] + zdot[0])
-        sy = self.s[1] + h * (self.zdot[1] + zdot[1])
-        if self._before is not None:  # the noise, from the second difference of ż_ij
-            ex = zdot[0] - 2.0 * self.zdot[0] + self._before[0]
-            ey = zdot[1] - 2.0 * self.zdot[1] + self._before[1]
+        sx = bx + h * (last[0] + zx)
+        sy = by + h * (last[1] + zy)
+        prior = self._before
+        if prior is not None:  # the noise, from the second difference of ż_ij
+            ex = zx - 2.0 * last[0] + prior[0]
+            ey = zy - 2.0 * last[1] + prior[1]
             lam, second = self.fit.forgetting, self._second
             second[0] = lam * second[0] + ex * ex + ey * ey
             second[1] = lam * second[1] + 1.0
             self.noise = second[0] / (12.0 * second[1])
-        self.s = (sx, sy)
-        self._before, self.zdot = self.zdot, zdot
+        self.s = s = (sx, sy)
+        self._before, self.zdot = last, zdot
         self.last_dt = dt
-        self._add(self.s)
+        self._add(s)
         fit = self._solution
         if fit is not None:  # both ends about the same centre: its own refits are no turn
-            cx, cy = fit.estimate[0], fit.estimate[1]
-            self.last_turn = angle_between((before[0] - cx, before[1] - cy), (sx - cx, sy - cy))
+            cx, cy, _ = fit.estimate
+            self.last_turn = angle_between((bx - cx, by - cy), (sx - cx, sy - cy))
             if follow:
                 self.follow(self.last_turn)
         else:
-            self.last_turn = angle_between(self._before, zdot)  # ż_ij turns with z_ij
+            self.last_turn = angle_between(last, zdot)  # ż_ij turns with z_ij
             self.direction = None
 
     def follow(self, turn: float, variance: float | None = None) -> None:
@@ -159,7 +175,7 @@ class ArcRelativePosition:
         if fit is None or not self.moving:
             return
         zdot, dt = self.zdot, self.last_dt
-        r = self._distance
+        r = self.distance
         if self.direction is None:  # start from the arc, with its uncertainty
             c = fit.estimate
             self.direction = math.atan2(self.s[1] - c[1], self.s[0] - c[0])
@@ -185,9 +201,15 @@ class ArcRelativePosition:
 
     def _add(self, s: Vec2) -> None:
         x, y = s
-        self.fit.add((2.0 * x, 2.0 * y, 1.0), x * x + y * y)
-        solution = self.fit.solve() if self.fit.rows >= 10 else None
-        self._solution = self._distance = self._distance_std = None
+        fit = self.fit
+        fit.add((2.0 * x, 2.0 * y, 1.0), x * x + y * y)
+        if self._solution is not None:
+            self._unsolved += 1
+            if self._unsolved < SOLVE_EVERY:
+                return
+        self._unsolved = 0
+        solution = fit.solve() if fit.rows >= 10 else None
+        self._solution = self.distance = self.distance_std = None
         if solution is None:
             return
         cx, cy, d = solution.estimate
@@ -199,7 +221,7 @@ class ArcRelativePosition:
         std = math.sqrt(solution.variance_of((cx / r, cy / r, 0.5 / r), scale))
         if std > 0.5 * r:  # the circle not yet determined
             return
-        self._solution, self._distance, self._distance_std = solution, r, std
+        self._solution, self.distance, self.distance_std = solution, r, std
 
     @property
     def _scale(self) -> float:
@@ -214,7 +236,7 @@ class ArcRelativePosition:
     @property
     def estimate(self) -> Vec2 | None:
         """``z_ij = r̂ (cos ψ̂, sin ψ̂)`` at the last sample used, in ``W`` then."""
-        r, psi = self._distance, self.direction
+        r, psi = self.distance, self.direction
         if r is None or psi is None:
             return None
         last_r, last_psi, z = self._last_estimate
@@ -222,11 +244,6 @@ class ArcRelativePosition:
             z = (r * math.cos(psi), r * math.sin(psi))
             self._last_estimate = (r, psi, z)
         return z
-
-    @property
-    def distance(self) -> float | None:
-        """``‖z_ij‖ = √(d + ‖c‖²)``, the fitted radius."""
-        return self._distance
 
     @property
     def covariance(self) -> Covariance | None:
@@ -265,9 +282,3 @@ class ArcRelativePosition:
         """The centre's standard deviation along its least certain axis (m)."""
         cov = self.centre_covariance
         return None if cov is None else largest_std(*packed(cov))
-
-    @property
-    def distance_std(self) -> float | None:
-        """The standard deviation (m) of :attr:`distance`: the fit's, through
-        ``∂r/∂p = (c_x/r, c_y/r, 1/(2r))``, scaled by ``N`` and :data:`CORRELATION`."""
-        return self._distance_std

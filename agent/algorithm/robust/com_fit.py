@@ -93,17 +93,17 @@ class ComFit(RunFit):
         ex, ey = c * ax - s * ay, s * ax + c * ay  # (n/J) R(−α) Qᵀ a
         if self.started:
             (c0, s0), (qx, qy) = self._turned, self._regressor  # at the last α
-            e0 = (c0 * ax - s0 * ay, s0 * ax + c0 * ay)
-            p0 = (sign * qx + e0[0], sign * qy + e0[1])
-            phi = (sign * px + ex, sign * py + ey)
-            once, twice = self._once, self._twice
+            p0x = sign * qx + (c0 * ax - s0 * ay)  # φ at the last α, and now
+            p0y = sign * qy + (s0 * ax + c0 * ay)
+            phx, phy = sign * px + ex, sign * py + ey
+            (ox, oy), (tx, ty) = self._once, self._twice
             h = 0.5 * dt * arc_factor(alpha - self._alpha)
             dd = dt * dt
             self._twice = (
-                twice[0] + dt * once[0] + dd * (p0[0] / 3.0 + phi[0] / 6.0),
-                twice[1] + dt * once[1] + dd * (p0[1] / 3.0 + phi[1] / 6.0),
+                tx + dt * ox + dd * (p0x / 3.0 + phx / 6.0),
+                ty + dt * oy + dd * (p0y / 3.0 + phy / 6.0),
             )
-            self._once = (once[0] + h * (p0[0] + phi[0]), once[1] + h * (p0[1] + phi[1]))
+            self._once = (ox + h * (p0x + phx), oy + h * (p0y + phy))
             self._spin_twice += self._spin_once * dt + 0.5 * spin * dd
             self._spin_once += spin * dt
             self.t += dt
@@ -141,11 +141,11 @@ class ComFit(RunFit):
     @property
     def std(self) -> float | None:
         """The standard deviation (m) of :attr:`estimate` along its least certain axis."""
-        cov = self.covariance
-        if cov is None:
+        fit = self._solution
+        if fit is None:
             return None
-        (a, b), (_, d) = cov
-        return largest_std(a, b, d)
+        k, inverse = self._scale * fit.variance, fit.inverse  # as :attr:`covariance`
+        return largest_std(k * inverse[12], k * inverse[13], k * inverse[18])
 
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C = R(α) c`` after a rotation ``α``."""

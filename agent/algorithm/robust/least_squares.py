@@ -19,7 +19,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from agent.algorithm.robust.normal_equations import accumulator, quadratic_form, solver
+from agent.algorithm.robust.normal_equations import (
+    QuadraticForm,
+    accumulator,
+    quadratic_form,
+    solver,
+)
 
 
 class LeastSquares:
@@ -40,6 +45,7 @@ class LeastSquares:
         self._bb = 0.0
         self._add = accumulator(params)
         self._solve = solver(params)
+        self._form = quadratic_form(params)
 
     def add(self, row: Sequence[float], target: float) -> None:
         """One more row ``rowᵀ p ≈ target`` (``row``: ``p`` numbers)."""
@@ -64,7 +70,7 @@ class LeastSquares:
             return None
         estimate, inverse, explained = solved
         rss = max(self._bb - explained, 0.0)
-        return Solution(estimate, inverse, rss / (self.rows - p), self.rows)
+        return Solution(estimate, inverse, rss / (self.rows - p), self.rows, self._form)
 
 
 CORRELATION_TIME = 0.4
@@ -143,15 +149,18 @@ class ReciprocalFit(RunFit):
 
 class Solution:
     """A solved fit: ``estimate`` ``p̂``, ``inverse`` ``M⁻¹`` (row-major), ``variance``
-    ``σ̂²`` (the residuals' mean square) and the number of ``rows``."""
+    ``σ̂²`` (the residuals' mean square) and the number of ``rows``; ``form`` is
+    :func:`~agent.algorithm.robust.normal_equations.quadratic_form` of ``p`` (looked up once
+    per fit rather than at every variance)."""
 
-    __slots__ = ("estimate", "inverse", "variance", "rows")
+    __slots__ = ("estimate", "inverse", "variance", "rows", "_form")
 
-    def __init__(self, estimate, inverse, variance: float, rows: float):
+    def __init__(self, estimate, inverse, variance: float, rows: float, form: QuadraticForm):
         self.estimate: tuple[float, ...] = estimate
         self.inverse: tuple[float, ...] = inverse
         self.variance = variance
         self.rows = rows
+        self._form = form
 
     def covariance(self, scale: float = 1.0, of: Sequence[int] | None = None) -> list[list[float]]:
         """``scale · σ̂² M⁻¹``, or its rows and columns ``of`` (the covariance of those
@@ -164,13 +173,14 @@ class Solution:
     def reciprocal(self, index: int, scale: float = 1.0) -> tuple[float, float]:
         """``1/p̂_index`` and its standard deviation ``std(p̂_index) / p̂_index²`` (first
         order), for a parameter fitted as the reciprocal of a positive quantity (``1/J``,
-        ``1/m``)."""
+        ``1/m``). ``Var(p̂_index)`` is :meth:`variance_of` the unit gradient at ``index``:
+        ``M⁻¹``'s diagonal entry there, read directly."""
         p = self.estimate[index]
-        gradient = [0.0] * len(self.estimate)
-        gradient[index] = 1.0
-        return 1.0 / p, math.sqrt(self.variance_of(gradient, scale)) / (p * p)
+        diagonal = self.inverse[index * (len(self.estimate) + 1)]
+        variance = max(scale * self.variance * diagonal, 0.0)
+        return 1.0 / p, math.sqrt(variance) / (p * p)
 
     def variance_of(self, gradient: Sequence[float], scale: float = 1.0) -> float:
         """``scale · σ̂² gᵀ M⁻¹ g``: the variance of a function of ``p̂`` with gradient ``g``."""
-        total = quadratic_form(len(self.estimate))(self.inverse, gradient)
+        total = self._form(self.inverse, gradient)
         return max(scale * self.variance * total, 0.0)

@@ -21,9 +21,10 @@ An estimator adds a row to its fit and solves it a few times per tick and robot,
 arithmetic. So :func:`accumulator`, :func:`solver` and :func:`quadratic_form` write them out
 for ``p`` (every index a number or a name, every sum over its terms) and compile that once.
 The code performs the same floating-point operations in the same order as the loops, each sum
-added term by term from 0.0, so its results are theirs bit for bit
+added term by term from its first term, so its results are theirs bit for bit
 (``tests/unit/agent/test_robust_estimation.py`` holds it to them) and the same on every Python
-(``sum`` of floats adds them so up to 3.11, compensated from 3.12 on).
+(``sum`` of floats adds them so up to 3.11, compensated from 3.12 on). (A sum from 0.0 gives
+the same numbers but for the sign of an exact zero, for one addition more per sum.)
 """
 
 from __future__ import annotations
@@ -150,9 +151,9 @@ def _solve_source(p: int) -> str:
 
 
 def _sum(products: list[tuple[str, str]]) -> str | None:
-    """The source of ``Σ a·b`` over ``products``, added in their order from 0.0 (``None``
-    for no terms)."""
+    """The source of ``Σ a·b`` over ``products``, added in their order from the first
+    (``None`` for no terms)."""
     terms = [f"{a} * {b}" for a, b in products]
     if not terms:
         return None
-    return f"(0.0 + {' + '.join(terms)})"
+    return f"({' + '.join(terms)})"

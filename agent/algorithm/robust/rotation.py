@@ -105,6 +105,8 @@ class RotationConsensus:
         """This robot's own ``Var(δ_i)``, the input of ``ν``'s consensus."""
         self._used: dict[int, int] = {}
         """Each neighbour's instant whose level was used last."""
+        self._weights: dict[int, float] = {}
+        """``a_ij`` by the neighbour's degree (Metropolis: the two degrees alone)."""
 
     @property
     def turn_variance(self) -> float:
@@ -125,8 +127,7 @@ class RotationConsensus:
         own level at instant ``e`` (``None`` if forgotten). Returns the team's turn, the step
         ``θ_i(e) − θ_i(e−1)``."""
         correction = variance_change = 0.0
-        used = self._used
-        now = instant
+        used, weights = self._used, self._weights
         for j, degree, level_instant, level, their_variance in heard:
             if level_instant < 0 or used.get(j) == level_instant:
                 continue
@@ -134,7 +135,12 @@ class RotationConsensus:
             if mine is None:
                 continue
             used[j] = level_instant
-            a = metropolis_weight(self.degree, degree) * delay_factor(now - 1 - level_instant)
+            a = weights.get(degree)
+            if a is None:
+                a = weights[degree] = metropolis_weight(self.degree, degree)
+            delay = instant - 1 - level_instant
+            if delay > 0:  # (ρ_0 = 1: a level on time keeps the plain weight)
+                a *= delay_factor(delay)
             correction += a * wrapped(level - mine)
             variance_change += a * (their_variance - self.variance)
         if variance is not None:

@@ -13,6 +13,7 @@ import pytest
 from agent.algorithm.estimation.estimator import Estimator
 from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
 from agent.algorithm.paper.relative_position import RelativePosition
+from agent.algorithm.robust import drive_gain
 from agent.algorithm.robust.arc_fit import ArcRelativePosition
 from agent.algorithm.robust.com_fit import ComFit
 from agent.algorithm.robust.drive_gain import DriveGain
@@ -68,11 +69,11 @@ def test_least_squares_forgetting_follows_a_change() -> None:
 
 
 def _dot(pairs) -> float:
-    """``Σ a·b``, term by term from 0.0."""
-    total = 0.0
+    """``Σ a·b``, term by term from the first (0.0 for none)."""
+    total = None
     for a, b in pairs:
-        total += a * b
-    return total
+        total = a * b if total is None else total + a * b
+    return 0.0 if total is None else total
 
 
 def _solved_by_loops(m: list[float], v: list[float], p: int):
@@ -576,6 +577,20 @@ def test_drive_gain_through_a_lagging_drive(lag: float) -> None:
     for command, measured in _drive(1.03, lag, 1000, 0.0):
         drive.update(command, measured, DT)
     assert drive.estimate == pytest.approx(1.03, rel=2e-3)
+
+
+def test_drive_gain_narrows_to_the_lags_near_its_best(monkeypatch) -> None:
+    """After 2 s only the lags near the best run on, and the gain is the whole grid's."""
+    rows = _drive(0.97, 0.02, 1500, 0.5, 3)
+    narrowed = DriveGain()
+    for command, measured in rows:
+        narrowed.update(command, measured, DT)
+    monkeypatch.setattr(drive_gain, "NARROW_ROWS", 10**9)
+    whole = DriveGain()
+    for command, measured in rows:
+        whole.update(command, measured, DT)
+    assert len(narrowed._lags) == 2 * drive_gain.NARROW_LAGS + 1 < len(whole._lags)
+    assert narrowed.estimate == whole.estimate and narrowed.std == whole.std
 
 
 def test_drive_gain_under_force_noise_and_its_uncertainty() -> None:
