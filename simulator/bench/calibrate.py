@@ -23,9 +23,9 @@ The calibrations (:data:`CALIBRATIONS`), each the measurement its constant's doc
 describes, on the seeds it names by default:
 
 - ``published-variance``:
-  :data:`~agent.algorithm.robust.uncertainty.PUBLISHED_VARIANCE` on the published ``Ĵ``,
-  ``contact_to_com`` and ``z_ij`` (and the team's ``m̂``, published unscaled), over the noise
-  benchmark's runs of seeds 20–59;
+  :data:`~agent.algorithm.robust.uncertainty.PUBLISHED_VARIANCE` on the published ``m̂``,
+  ``Ĵ``, ``contact_to_com``, ``z_ij`` and the floor's friction, over the noise benchmark's runs
+  of the generated loads on floors, seeds 0–39;
 - ``direction-variance``: :data:`~agent.algorithm.robust.arc_fit.DIRECTION_VARIANCE` on the
   variance across each ``z_ij`` (the direction filter's ``r² P``), the ellipse taken without
   ``PUBLISHED_VARIANCE``, seeds 0–39;
@@ -136,7 +136,7 @@ def _edge_rows(name: str, factor: float, needed: list[tuple[tuple[int, int], flo
 def published_variance(results: Sequence) -> list[Factor]:
     """:data:`~agent.algorithm.robust.uncertainty.PUBLISHED_VARIANCE` from the seeds'
     results (:class:`~simulator.bench.noise.SeedResult`): the whole published variance is
-    scaled, the team's ``m̂``'s by 1."""
+    scaled."""
     from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE
 
     factors = PUBLISHED_VARIANCE
@@ -144,7 +144,7 @@ def published_variance(results: Sequence) -> list[Factor]:
     for result in results:
         found = result.intervals
         for s in found.get("mass", []):
-            mass.append(scalar_factor(s.error[0], s.covariance[0]))
+            mass.append(scalar_factor(s.error[0], s.covariance[0] / factors["mass"]))
         for s in found.get("moment", []):
             moment.append(scalar_factor(s.error[0], s.covariance[0] / factors["moment"]))
         for s in found.get("contact_to_com", []):
@@ -161,7 +161,7 @@ def published_variance(results: Sequence) -> list[Factor]:
         for found_all in [lambda k: [s for r in results for s in r.intervals.get(k, [])]]
     }
     return [
-        Factor("m (the team's, published unscaled)", 1.0, tuple(mass)),
+        Factor('m ("mass", the team\'s)', factors["mass"], tuple(mass)),
         Factor('J ("moment")', factors["moment"], tuple(moment)),
         Factor('contact_to_com ("contact_to_com")', factors["contact_to_com"], tuple(offset)),
         *_edge_rows('z_ij ("relative")', factors["relative"], edges),
@@ -308,8 +308,8 @@ CALIBRATIONS = (
         "published-variance",
         "PUBLISHED_VARIANCE",
         "agent/algorithm/robust/uncertainty.py",
-        "factors on the published variances of J, contact_to_com and z_ij",
-        20,
+        "factors on the published variances of m, J, contact_to_com, z_ij and the floor's friction",
+        0,
         40,
         published_variance,
     ),
@@ -351,12 +351,14 @@ def command(
     seeds: int,
     ideal_drives: bool = False,
     coulomb: tuple[float, float] | None = None,
+    generated: bool = False,
 ) -> str:
     """The command line that reproduces a calibration."""
     line = f"{PROG} bench calibrate {calibration.name}"
     if first_seed is not None:
         line += f" --first-seed {first_seed}"
-    line += f" --seeds {seeds}" + (" --ideal-drives" if ideal_drives else "")
+    line += f" --seeds {seeds}" + (" --generated" if generated else "")
+    line += " --ideal-drives" if ideal_drives else ""
     return line + ("" if coulomb is None else f" --coulomb-range {coulomb[0]:g} {coulomb[1]:g}")
 
 
@@ -420,27 +422,48 @@ def format_arc_ratios(ratios: dict[tuple[float, float], float]) -> list[str]:
 
 # ------------------------------------------------------------------------------ the commands
 def _run_noise(
-    first_seed: int, seeds: int, ideal_drives: bool, coulomb: tuple[float, float] | None = None
+    first_seed: int,
+    seeds: int,
+    ideal_drives: bool,
+    coulomb: tuple[float, float] | None = None,
+    generated: bool = False,
 ) -> tuple[str, list]:
-    """The noise benchmark's runs of the seeds (with ideal drives if told; on the paper's load
-    on four casters, ``paper-floor.toml``'s, each seed's ``μ`` drawn from ``coulomb`` if
-    given), and what they were run on."""
+    """The noise benchmark's runs of the seeds (with ideal drives if told), of the paper's
+    load or, ``generated``, of each seed's generated load (as ``heft bench noise --generated``
+    runs them); with ``coulomb``, on a floor whose ``μ`` each seed draws from it (the paper's
+    load on four casters, ``paper-floor.toml``'s; a generated load on its area), and what they
+    were run on."""
     from simulator.bench.floor import FloorSettings
-    from simulator.bench.noise import NoiseSettings, run_noise_bench, say_seed, timed
+    from simulator.bench.noise import (
+        NoiseSettings,
+        for_generated,
+        run_noise_bench,
+        say_seed,
+        timed,
+    )
+    from simulator.generate import generate_scenario
     from simulator.scenario import PAPER_SCENARIO, load_scenario
 
-    if coulomb is None:
-        scenario, floor = load_scenario(PAPER_SCENARIO), None
-    else:
-        floor = FloorSettings(coulomb)
-        scenario = load_scenario(PAPER_SCENARIO.parent / "paper-floor.toml")
+    floor = None if coulomb is None else FloorSettings(coulomb)
     settings = dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first_seed, floor=floor)
+    if generated:
+        scenarios, label = generate_scenario, "the generated scenarios"
+        settings = dataclasses.replace(for_generated(settings), paper_estimators=False)
+    else:
+        scenario = load_scenario(
+            PAPER_SCENARIO if coulomb is None else PAPER_SCENARIO.parent / "paper-floor.toml"
+        )
+        label = f"scenario {scenario.name!r}"
+
+        def scenarios(seed: int):
+            return scenario
+
     if ideal_drives:
         settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
 
-    results, wall = timed(run_noise_bench, lambda seed: scenario, settings, say_seed)
+    results, wall = timed(run_noise_bench, scenarios, settings, say_seed)
     setting = (
-        f"the noise benchmark's runs: scenario {scenario.name!r}, {settings.noise_text},"
+        f"the noise benchmark's runs: {label}, {settings.noise_text},"
         f" {seed_range(first_seed, seeds)} ({wall:.0f} s wall)"
     )
     return setting, results
@@ -468,6 +491,7 @@ def run(calibration: Calibration, args: argparse.Namespace) -> int:
     Bound(1, 1000, "seeds").check("--seeds", args.seeds)
     first_seed = getattr(args, "first_seed", None)
     ideal = getattr(args, "ideal_drives", False)
+    generated = getattr(args, "generated", False)
     coulomb = None
     if calibration.first_seed is None:
         setting, found = _run_arcs(args.seeds)
@@ -478,8 +502,8 @@ def run(calibration: Calibration, args: argparse.Namespace) -> int:
             Bound(0, 0.5, "").check("--coulomb-range", coulomb[0])
             Bound(coulomb[0], 0.5, "").check("--coulomb-range", coulomb[1])
             coulomb = (coulomb[0], coulomb[1])
-        setting, found = _run_noise(first_seed, args.seeds, ideal, coulomb)
-    print(command(calibration, first_seed, args.seeds, ideal, coulomb))
+        setting, found = _run_noise(first_seed, args.seeds, ideal, coulomb, generated)
+    print(command(calibration, first_seed, args.seeds, ideal, coulomb, generated))
     notes = calibration.notes(found)
     print(format_report(calibration, setting, calibration.factors(found), notes))
     return 0
@@ -519,6 +543,12 @@ def add_parser(benchmarks: argparse._SubParsersAction) -> None:
                 help=f"the noise benchmark's seeds from S (default: {calibration.first_seed})",
             )
             sub.add_argument(
+                "--generated",
+                action="store_true",
+                help="each seed's generated load (as heft bench noise --generated runs it)"
+                " instead of the paper's",
+            )
+            sub.add_argument(
                 "--ideal-drives",
                 action="store_true",
                 help="drives that apply exactly what they are commanded (no lag, no gain"
@@ -529,8 +559,9 @@ def add_parser(benchmarks: argparse._SubParsersAction) -> None:
                 type=float,
                 nargs=2,
                 metavar=("LO", "HI"),
-                help="on a real floor: the paper's load on four casters (paper-floor.toml's),"
-                " each seed's kinetic friction drawn in [LO, HI] (default: frictionless)",
+                help="on a real floor: the paper's load on four casters (paper-floor.toml's) or"
+                " a generated load on its area, each seed's kinetic friction drawn in [LO, HI]"
+                " (default: frictionless)",
             )
         sub.add_argument(
             "--seeds",

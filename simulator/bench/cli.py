@@ -239,11 +239,7 @@ def _noisy_runs(
 ) -> tuple[Callable[[int], Scenario], str, NoiseSettings]:
     """What ``noise`` and ``sweep`` run: each seed's scenario (SCENARIO's, or with
     ``--generated`` the generated one of that seed), its label, and the settings."""
-    from simulator.bench.noise import (
-        GENERATED_INERTIA_BRAKE_S,
-        GENERATED_PUSH_DAMPING,
-        NoiseSettings,
-    )
+    from simulator.bench.noise import NoiseSettings, for_generated
 
     if args.generated is not None:
         from simulator.generate import generate_scenario
@@ -261,11 +257,7 @@ def _noisy_runs(
 
     settings = dataclasses.replace(NoiseSettings(), seeds=seeds, first_seed=first)
     if args.generated is not None:
-        settings = dataclasses.replace(
-            settings,
-            push_damping=GENERATED_PUSH_DAMPING,
-            inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
-        )
+        settings = for_generated(settings)
     if args.ideal_drives:
         settings = dataclasses.replace(settings, time_constant_s=0.0, gain_error_std=0.0)
     floor = floor_settings(args)

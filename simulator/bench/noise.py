@@ -242,6 +242,16 @@ class SeedResult:
     (:func:`~simulator.bench.floor.on_floor`)."""
 
 
+def for_generated(settings: NoiseSettings) -> NoiseSettings:
+    """``settings`` as the generated scenarios run: :data:`GENERATED_PUSH_DAMPING` and
+    :data:`GENERATED_INERTIA_BRAKE_S`."""
+    return dataclasses.replace(
+        settings,
+        push_damping=GENERATED_PUSH_DAMPING,
+        inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
+    )
+
+
 def noisy(scenario: Scenario, settings: NoiseSettings, seed: int, estimator: Estimators):
     """``scenario`` with the settings' noise and drives, run seed ``seed``, ``estimator``."""
     return dataclasses.replace(

@@ -33,20 +33,10 @@ def generated_on_floor(seed: int, max_time_s: float = 30.0):
 
     from agent.algorithm.tuning import Estimators
     from simulator.bench.floor import FloorSettings, on_floor
-    from simulator.bench.noise import (
-        GENERATED_INERTIA_BRAKE_S,
-        GENERATED_PUSH_DAMPING,
-        NoiseSettings,
-        noisy,
-    )
+    from simulator.bench.noise import NoiseSettings, for_generated, noisy
     from simulator.generate import generate_scenario
 
-    settings = dataclasses.replace(
-        NoiseSettings(),
-        push_damping=GENERATED_PUSH_DAMPING,
-        inertia_brake_s=GENERATED_INERTIA_BRAKE_S,
-        max_time_s=max_time_s,
-    )
+    settings = for_generated(dataclasses.replace(NoiseSettings(), max_time_s=max_time_s))
     scenario = noisy(generate_scenario(seed), settings, seed, Estimators.ROBUST)
     mu, mu_s = FloorSettings((0.005, 0.03)).draw(seed)
     scenario, _ = on_floor(scenario, mu, mu_s)

@@ -41,7 +41,7 @@ measures the factor on this variance again, for each robot's own ``m̂`` (the no
 benchmark's runs of seeds 0–39, before the team's consensus; a factor ``k`` is a correlation
 time of ``k Δt / 2``, two rows a tick): on 2026-11-27 it printed 2.53 for 95 % of them within
 1.96 standard deviations (92.5 % with every row counted), 3.14 with ``--ideal-drives``
-(91.9 %). The team's ``m̂``, which is published, needs no factor
+(91.9 %). The team's ``m̂``, which is published, has its own factor
 (:data:`~agent.algorithm.robust.uncertainty.PUBLISHED_VARIANCE`). The fit takes the
 commanded force for the applied one; the pipeline scales its ``m`` by the drives' mean gain
 (:mod:`agent.algorithm.robust.drive_gain`).

@@ -389,7 +389,7 @@ class RobustPipeline(EstimationPipeline):
         _, mass_std = self._robust_mass()
         if mass_std is not None:
             c = self.consensus
-            mass_std *= disagreement(
+            mass_std *= math.sqrt(PUBLISHED_VARIANCE["mass"]) * disagreement(
                 c["mean_mass_information"],
                 c["mean_weighted_log_mass"],
                 c["mean_weighted_square_log_mass"],

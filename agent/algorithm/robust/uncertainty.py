@@ -6,9 +6,11 @@ mean of the robot's own edges' (the consensus averages edges like them), and ``C
 push fit's turned with the load, plus ``c cᵀ (σ_J/J)²`` for the ``Ĵ`` it was computed with
 (``c ∝ J``), plus that of the gains' correction ``h``; then scaled as calibrated
 (:data:`PUBLISHED_VARIANCE`); :meth:`agent.algorithm.robust.pipeline.RobustPipeline._reported`
-computes them. The gains' corrections take every robot's gain as uncertain as
-this one's, ``σ_g``: ``ḡ`` and ``q / (w/n)`` then have about ``σ_g / √n`` relative, and
-``h = Σ g_i z_i / n`` has ``σ_g² w / (2 n²)`` per axis.
+computes them. The team's ``m̂``'s is that of a robot of mean information, widened where the
+robots' fits disagree (:mod:`agent.algorithm.robust.team_mass`), then scaled likewise. The
+gains' corrections take every robot's gain as uncertain as this one's, ``σ_g``: ``ḡ`` and
+``q / (w/n)`` then have about ``σ_g / √n`` relative, and ``h = Σ g_i z_i / n`` has
+``σ_g² w / (2 n²)`` per axis.
 """
 
 from __future__ import annotations
@@ -16,33 +18,41 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 PUBLISHED_VARIANCE = {
-    "relative": 1.14,
-    "contact_to_com": 1.28,
-    "moment": 1.41,
-    "friction_torque": 2.33,
-    "coulomb": 574.0,
+    "mass": 1.82,
+    "relative": 1.31,
+    "contact_to_com": 3.52,
+    "moment": 1.71,
+    "friction_torque": 29.2,
+    "coulomb": 509.0,
 }
-"""Factors on the variances the robust estimators publish for ``z_ij``, ``contact_to_com``,
-``Ĵ`` and the floor's friction torque ``τ̂_c`` and coefficient ``μ̂`` (not on those they settle
-by): the drives' gains, the reversing push and the floor's friction add errors their fits do
-not model, and the direction filters of the ``z_ij`` take the team's turn for twice as
-uncertain as independent robots' turns (:mod:`agent.algorithm.robust.rotation`). ``μ̂``'s fit
-counts each row of Step 7's displacement as independent, where its errors are the velocity
-noise's random walk and the friction's column is smooth: its variance is 574 times too small
-(a correlation time for that column would be the principled repair). Measured over 40 runs of
-the noise benchmark on a real floor (the paper's load on ``paper-floor.toml``'s four casters at
-1 cm/s with lagging drives of 2 % gain error, each seed's ``μ`` drawn in [0.5 %, 3 %],
-``μ_s`` = 1.5 ``μ``), seeds 20–59: 95 % of the errors fall within 1.96 published standard
-deviations (2.45 for the planar ones: the 95 % ellipse, each ``z_ij`` on its own) with the
-variances scaled by these factors; the team's ``m̂``, published unscaled, held the truth 97.9 %
-of the time. The benchmark's seeds, 0–19, were not used.
+"""Factors on the variances the robust estimators publish for the team's ``m̂``, ``z_ij``,
+``contact_to_com``, ``Ĵ`` and the floor's friction torque ``τ̂_c`` and coefficient ``μ̂`` (not on
+those they settle by): the drives' gains, the reversing push and the floor's friction add
+errors their fits do not model, and the direction filters of the ``z_ij`` take the team's turn
+for twice as uncertain as independent robots' turns (:mod:`agent.algorithm.robust.rotation`).
+``τ̂_c``'s fit takes the floor's torque for ``τ_c sgn ω``, exact only while the load spins
+about its COM; Step 4's turn also carries its COM along, and the supports' friction then
+makes less torque: its factor is large. ``μ̂``'s fit counts each row of Step 7's displacement
+as independent, where its errors are the velocity noise's random walk and the friction's
+column is smooth (a correlation time for that column would be the principled repair).
 
-``heft bench calibrate published-variance --first-seed 20 --seeds 40 --coulomb-range 0.005
-0.03`` prints each factor, the share inside with it, and the factor for 95 % inside. On
-2026-11-27, with the factors of the frictionless calibration before (0.79, 1.57, 1.52 and 1
-for both of the floor's), it printed 1.14 for ``relative`` (88.6 % inside), 1.28 for
-``contact_to_com`` (98.6 %), 1.41 for ``moment`` (95.0 %), 2.33 for ``friction_torque``
-(80.7 %) and 574 for ``coulomb`` (10.0 %), 35 of the 40 runs done."""
+Measured over the noise benchmark's runs of the generated loads on floors (1 cm/s, 0.5 N,
+lagging drives of 2 % gain error, each seed's ``μ`` drawn in [0.5 %, 3 %], ``μ_s`` = 1.5 ``μ``),
+seeds 0–39: 95 % of the errors fall within 1.96 published standard deviations (2.45 for the
+planar ones: the 95 % ellipse; for the ``z_ij``, all of a robot's edges at once, as the
+benchmark counts them) with the variances scaled by these factors. Seeds 40–79 were not used:
+they are the check.
+
+``heft bench calibrate published-variance --generated --coulomb-range 0.005 0.03`` prints
+each factor, the share inside with it, and the factor for 95 % inside. On 2026-11-27 it
+printed 1.82 for ``mass``, 1.31 for ``relative`` (1.19 for each edge on its own), 3.52 for
+``contact_to_com``, 1.71 for ``moment``, 29.2 for ``friction_torque`` and 509 for ``coulomb``,
+39 of the 40 runs done (the factors before were calibrated on the paper's load on
+``paper-floor.toml``'s casters, seeds 20–59: 1 for ``mass``, 1.14, 1.28, 1.41, 2.33 and 574; on
+these loads their intervals held the truth 45 % of the time for ``m̂`` and 57 % for ``τ̂_c``).
+With these factors the runs of seeds 40–79 held the truth 94.4 % of the time for ``m̂``, 91.2 %
+for ``Ĵ``, 97.2 % for ``contact_to_com``, 91.9 % for each robot's ``z_ij`` at once, 90.7 % for
+``τ̂_c`` and 92.6 % for ``μ̂``."""
 
 
 @dataclass(frozen=True)

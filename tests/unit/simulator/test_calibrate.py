@@ -94,14 +94,16 @@ def _seed(seed: int, intervals: dict[str, list[Interval]]) -> SeedResult:
 def test_published_variance_from_known_intervals() -> None:
     """Each estimate exactly on the boundary of the interval it needs: ``J`` with twice the
     published variance, ``contact_to_com`` with the published one, edges with half of it."""
-    k_j, k_c, k_z = (PUBLISHED_VARIANCE[key] for key in ("moment", "contact_to_com", "relative"))
+    k_m, k_j, k_c, k_z = (
+        PUBLISHED_VARIANCE[key] for key in ("mass", "moment", "contact_to_com", "relative")
+    )
     var = 0.01
     e_j = Z95 * math.sqrt(2 * var)  # needs 2 × what was published: 2 k_j
     on_ellipse = math.sqrt(CHI2_PLANAR * var)  # d² = χ²: needs the published k
     result = _seed(
         3,
         {
-            "mass": [Interval(1, (10.1,), (10.0,), (0.01,))],  # 1 σ out of 1.96
+            "mass": [Interval(1, (10.1,), (10.0,), (0.01 * k_m,))],  # 1 σ out of 1.96
             "moment": [Interval(1, (2.0 + e_j,), (2.0,), (var,))],
             "contact_to_com": [Interval(1, (on_ellipse, 0.0), (0.0, 0.0), (var, 0.0, var))],
             "relative_positions": [
@@ -112,7 +114,7 @@ def test_published_variance_from_known_intervals() -> None:
         },
     )
     mass, moment, offset, edges, robots = published_variance([result])
-    assert mass.factor == 1.0 and mass.needed == pytest.approx((1 / CHI2_SCALAR,))
+    assert mass.factor == k_m and mass.needed == pytest.approx((1 / CHI2_SCALAR,))
     assert moment.factor == k_j and moment.exact == pytest.approx(2 * k_j)
     assert offset.exact == pytest.approx(k_c) and offset.inside == 1.0
     assert edges.needed == pytest.approx((k_z, 0.0, k_z / 4))
@@ -191,7 +193,8 @@ def test_each_calibration_defaults_to_the_seeds_it_was_measured_on(heft) -> None
         return heft.parse_args(["bench", "calibrate", *words])
 
     args = parse("published-variance")
-    assert (args.first_seed, args.seeds, args.ideal_drives) == (20, 40, False)
+    assert (args.first_seed, args.seeds, args.ideal_drives, args.generated) == (0, 40, False, False)
+    assert parse("published-variance", "--generated").generated
     args = parse("direction-variance", "--seeds", "3")
     assert (args.first_seed, args.seeds) == (0, 3)
     args = parse("arc-correlation")
@@ -247,3 +250,14 @@ def test_the_table_gives_the_factor_its_coverage_and_the_one_for_95_percent() ->
     lines = format_factors([Factor("J", 0.4, (0.1, 0.5), " s"), Factor("m", 1.0, ())])
     assert lines[1].split() == ["J", "2", "0.4", "s", "50.0", "%", "0.5", "s"]
     assert lines[2].split() == ["m", "0", "1", "-", "-"]
+
+
+def test_the_command_line_of_a_calibration_on_generated_floors_reproduces_it(heft) -> None:
+    published = CALIBRATIONS[0]
+    line = command(published, 0, 40, coulomb=(0.005, 0.03), generated=True)
+    assert line == (
+        "heft bench calibrate published-variance --first-seed 0 --seeds 40 --generated"
+        " --coulomb-range 0.005 0.03"
+    )
+    args = heft.parse_args(line.split()[1:])
+    assert args.generated and tuple(args.coulomb_range) == (0.005, 0.03) and args.first_seed == 0
