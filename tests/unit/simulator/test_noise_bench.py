@@ -57,7 +57,10 @@ def test_the_report_and_each_goals_verdict() -> None:
     assert unmet(slower) == ["robust runs done within 30 s simulated"]
     assert unmet([*good[:-1], seed_result(19, 1.2, done=29.9)]) == []
     worse = [seed_result(s, 2.0, inside=s != 0) for s in range(20)]
-    assert unmet(worse) == [f"{q}: robust median / baseline's" for q in NAMES]
+    assert unmet(worse) == [f"{q}: robust median / baseline's (runs done)" for q in NAMES]
+    # a run that ended with a verdict has no estimates: the ratios are those of the runs done
+    held = [*good[:-1], dataclasses.replace(seed_result(19, 9.0), robust_done=False)]
+    assert figures(held)["ratio mass_rel"] == pytest.approx(1.2) and unmet(held) == []
     off_the_floor = [*good[:-1], seed_result(19, 1.2, travel=3.5)]
     report = format_noise_report(off_the_floor, NoiseSettings(), "x", 1.0)
     assert "on its floor: 19/20 (largest travel 3.50 m" in report
