@@ -32,7 +32,7 @@ def test_a_heavy_load_is_pushed_hard_enough_and_still_to_find_its_mass() -> None
     turning into Step 7's translation, and a push of about twice the floor's friction left its
     velocity within the noise for half a second about each reversal, where the fit's
     direction of motion is the noise's: m̂ was 12 % off. The brake stage now stops the turn and
-    the push is five times the friction force the team measured."""
+    the push is four times the friction force the team measured."""
     scenario, mu, _ = generated_on_floor(49)
     outcome = run_inprocess(scenario)
     assert outcome.converged, outcome.detail
