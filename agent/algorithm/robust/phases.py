@@ -86,7 +86,7 @@ PUSH_FRICTION_MARGIN = 4.0
 """The push's common force makes the team's ``n f`` at least this many times the floor's
 friction force, taken as ``τ̂₁ / r`` with ``r = √(w/n)`` the contacts' root-mean-square
 distance from their centroid (the supports' friction radius ``c`` is less for a load pushed at
-its rim, about 0.6 of it on the generated loads): the translation of Step 7's stage then slides
+its rim: 0.61 of it on generated load 38): the translation of Step 7's stage then slides
 the load, and its velocity passes quickly through zero at each reversal, where the fit's
 direction of motion is the noise's for as long as the speed is within it (with 3, generated
 load 49, 39 kg on μ = 1.3 %: m̂ 6.7 % off; with 4, 0.06 %). More speeds the load up beyond
