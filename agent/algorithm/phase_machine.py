@@ -249,9 +249,16 @@ class PhaseMachine:
         self.direction = self._inertia_direction(k, own)
         self._torque[k] = self.direction * self.inertia_torque
         # z_i turned to the middle of [t_k, t_k+1): the torque then averages ±k w.
-        lead = (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
-        z = rotate(own.centroid, lead)
+        z = self._turned_centroid(k, own)
         return inertia_force(self.direction * self.spin_sign * self.inertia_gain, z)
+
+    def _turned_centroid(self, k: int, own: OwnEstimates) -> Vec2:
+        """``z_i`` turned to the middle of tick ``k``."""
+        return rotate(own.centroid, self._lead(k, own))
+
+    def _lead(self, k: int, own: OwnEstimates) -> float:
+        """The load's turn from the estimation instant to the middle of tick ``k`` (rad)."""
+        return (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
 
     def _push_ready(self, k: int, own: OwnEstimates) -> bool:
         return own.settled(Phase.PUSH)

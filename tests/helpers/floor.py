@@ -1,8 +1,15 @@
-"""A plant's truth on a floor with friction, for tests that judge the friction estimates."""
+"""A plant's truth on a floor with friction, for tests that judge the friction estimates, and
+the generated loads on the noise benchmark's floors."""
 
 from __future__ import annotations
 
+import dataclasses
+
+from agent.algorithm.tuning import Estimators
 from agent.platform.protocol import Truth
+from simulator.bench.floor import FloorSettings, on_floor
+from simulator.bench.noise import NoiseSettings, for_generated, noisy
+from simulator.generate import generate_scenario
 
 FLOOR = Truth(
     10,
@@ -29,13 +36,6 @@ def generated_on_floor(seed: int, max_time_s: float = 30.0):
     """``(scenario, μ, μ_s)``: generated load ``seed`` as the noise benchmark runs it on floors
     (``heft bench noise --generated N --coulomb-range 0.005 0.03``): its sensors' noise, its
     drives, the robust estimators with the generated loads' settings, its seed's floor."""
-    import dataclasses
-
-    from agent.algorithm.tuning import Estimators
-    from simulator.bench.floor import FloorSettings, on_floor
-    from simulator.bench.noise import NoiseSettings, for_generated, noisy
-    from simulator.generate import generate_scenario
-
     settings = for_generated(dataclasses.replace(NoiseSettings(), max_time_s=max_time_s))
     scenario = noisy(generate_scenario(seed), settings, seed, Estimators.ROBUST)
     mu, mu_s = FloorSettings((0.005, 0.03)).draw(seed)

@@ -354,14 +354,6 @@ class RobustPhases(PhaseMachine):
         torque = min(max(torque, -most), most)
         return inertia_force(torque / w, self._turned_centroid(k, own))
 
-    def _turned_centroid(self, k: int, own: OwnEstimates) -> Vec2:
-        """``z_i`` turned to the middle of tick ``k``."""
-        return rotate(own.centroid, self._lead(k, own))
-
-    def _lead(self, k: int, own: OwnEstimates) -> float:
-        """The load's turn from the estimation instant to the middle of tick ``k`` (rad)."""
-        return (own.omega or 0.0) * (k + 0.5 - own.instant) * self.dt
-
     def _first_push_sign(self) -> float:
         return -1.0 if self.load_changes % 2 else 1.0
 

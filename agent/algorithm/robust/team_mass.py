@@ -60,8 +60,8 @@ def inputs(
     """A robot's inputs of the team's means, in declaration order
     (:data:`agent.platform.team.TEAM_QUANTITIES`): ``‖x_i‖²`` (→ ``w / n``), ``g_i``,
     ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i``, ``ι_i ln m_i``, ``ι_i (ln m_i)²`` and
-    ``τ_i``, for its offsets iterate ``x``,
-    its drive's gain, its mass input (:func:`mass_input`) and its torque in Step 1's spin-up
+    ``τ_i``, for its offsets iterate ``x``, its drive's gain, its mass input
+    (:func:`mass_input`) and its torque in Step 1's spin-up
     (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`)."""
     norm2 = x[0] * x[0] + x[1] * x[1]
     return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, *mass, torque)
@@ -87,7 +87,7 @@ def disagreement(
     """``S = max(1, √(χ²/(n − 1)))``, ``χ² = n ι s² / ρ₀²`` with ``s² = ψ/ι − (λ/ι)²``, from the
     consensus states ``ι``, ``λ`` (``weighted_log``) and ``ψ`` (``weighted_square_log``): the
     factor on the team's mass's standard deviation for fits further apart than their own
-    standard deviations say (1 for a lone robot, or before the states are a weighted mean)."""
+    standard deviations say (1 for a lone robot, or before any robot has a fit)."""
     if n < 2 or not information > 0.0:
         return 1.0
     mean = weighted_log / information
