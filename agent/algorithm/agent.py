@@ -153,6 +153,7 @@ class Agent:
         for e in range(pipeline.instant + 1, newest + 1):
             pipeline.estimate_at(e, inbox, phases)
         phases.team_back = self.team_back
+        phases.degrees = {j: s.degree for j, s in inbox.latest.items()}
         views = [s.barrier for s in inbox.latest.values()] + [s.barrier for s in others]
         if phases.step(k, pipeline, views):
             pipeline.enter(phases.phase, k, phases)

@@ -53,6 +53,12 @@ class OwnEstimates(Protocol):
         ...
 
     @property
+    def mean_kick_level(self) -> float:
+        """The team's mean kick size in Step 1 (N), by consensus (0 for a family that does not
+        average it)."""
+        ...
+
+    @property
     def moment(self) -> float | None:
         """``Ĵ`` (Step 4)."""
         ...
@@ -89,6 +95,9 @@ class Schedule(Protocol):
     spin_torque: float
     """This robot's torque ``z_i × f_i`` about the centroid in Step 1's spin-up, filtered
     (N m; robust family, else 0)."""
+    kick_level: float
+    """N: the size of this robot's Step 1 kick (``kick_force``, grown by the robust family
+    while the load is still)."""
 
     @property
     def phase(self) -> Phase:
@@ -109,7 +118,9 @@ class Schedule(Protocol):
         ...
 
     def mean_torque(self, first: int, last: int) -> float:
-        """The team's mean torque (Step 4's ``±k w``) over ticks ``first..last − 1``."""
+        """The team's mean torque over ticks ``first..last − 1``: Step 4's ``±k w``; in Step 5's
+        swing, what a family adds beyond a constant torque (the robust family's brake near
+        ``max_turn_rate``)."""
         ...
 
     def mean_push_sign(self, first: int, last: int) -> float:

@@ -85,12 +85,16 @@ class PhaseMachine:
         """The team's phase (a rejoin's machine takes over the barrier that began it)."""
         self.team_back = False
         """Whether every neighbour is alive: in ``halted``, this robot is then ready."""
+        self.degrees: dict[int, int] = {}
+        """Each neighbour's degree, as its last share gave it."""
         self.entered: dict[Phase, int] = {Phase.EXCITE: 0}
         """The tick at which each phase was entered (phases skipped are not listed)."""
         self.kick_ticks = round(tuning.kick_duration_s / self.dt)
         self.kick = kick_force(config.seed, config.robot, tuning.kick_force)
         self.spin_torque = 0.0
         """N m: this robot's filtered torque in Step 1's spin-up (a family may measure it)."""
+        self.kick_level = tuning.kick_force
+        """N: the size of this robot's kick (a family may grow it while the load is still)."""
         self.inertia_min_ticks = round(tuning.inertia_min_s / self.dt)
         self.spin_sign = 0.0
         """``sign(ω)`` when the inertia phase began: the torque first speeds that turn up."""
@@ -101,7 +105,8 @@ class PhaseMachine:
         self.direction = 1.0
         """``+1`` while the inertia phase speeds the turn up, ``−1`` while it brakes."""
         self._torque: dict[int, float] = {}
-        """The team's torque (``±k w``) during each tick of the inertia phase."""
+        """The team's torque during each tick: Step 4's ``±k w``; in Step 5's swing, what the family
+        adds beyond a constant torque (:meth:`mean_torque`)."""
         self._damping: dict[int, Vec2] = {}
         """What this robot added to the common push during each tick (robust ``push_damping``)."""
         self.moment_used: float | None = None
@@ -313,7 +318,9 @@ class PhaseMachine:
         return total / (last - first)
 
     def mean_torque(self, first: int, last: int) -> float:
-        """The team's mean torque (Step 4's input ``±k w``) over ticks ``first..last − 1``."""
+        """The team's mean torque over ticks ``first..last − 1``: Step 4's input ``±k w``, and
+        in Step 5's swing what the family adds beyond a constant torque (the robust family's
+        brake near ``max_turn_rate``)."""
         torque, total = self._torque, 0.0
         for t in range(first, last):
             total += torque.get(t, 0.0)

@@ -126,6 +126,11 @@ class EstimationPipeline:
         return self.consensus["mean_spin_torque"]
 
     @property
+    def mean_kick_level(self) -> float:
+        """The team's mean kick size in Step 1 (N; 0 for a family that does not average it)."""
+        return self.consensus["mean_kick_level"]
+
+    @property
     def moment(self) -> float | None:
         """``Ĵ`` (Step 4)."""
         return None if self.inertia is None else self.inertia.estimate
@@ -280,7 +285,7 @@ class EstimationPipeline:
         self.swung = self.swung or (pushing and not swinging)
         if swinging:
             self.observer.update(omega, sign, span)
-            self._update_com(alpha, sign, span, added)
+            self._update_com(alpha, sign, span, added, schedule.mean_torque(prev, e))
         ref_offset = self.com.estimate
         if ref_offset is None:
             return
@@ -450,7 +455,9 @@ class EstimationPipeline:
     def _new_com(self, schedule: Schedule) -> Any:
         raise NotImplementedError
 
-    def _update_com(self, alpha: float, sign: float, span: float, added: Vec2) -> None:
+    def _update_com(
+        self, alpha: float, sign: float, span: float, added: Vec2, torque: float = 0.0
+    ) -> None:
         raise NotImplementedError
 
     def _new_mass(self, schedule: Schedule) -> Any:

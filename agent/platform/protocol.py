@@ -528,7 +528,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 11
+WIRE_VERSION = 12
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 

@@ -169,6 +169,14 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
         " robust): n times it is the floor's friction torque once the turn is steady",
     ),
     TeamQuantity(
+        "mean_kick_level",
+        1,
+        MAX_FORCE,
+        Averaging.MEAN,
+        doc="A_i → the robots' mean kick size in Step 1 (N, robust): the spin-up's gain on"
+        " every robot, so that each edge's two terms cancel",
+    ),
+    TeamQuantity(
         "rotation",
         1,
         math.pi,

@@ -42,10 +42,10 @@ class PaperPipeline(EstimationPipeline):
         return None
 
     def _inputs(self, x: Vec2) -> Sequence[float]:
-        """``‖x_i‖²`` (→ ``w / n``); ideal drives (gain 1), no mass information and no spin
-        torque (the robust family's)."""
+        """``‖x_i‖²`` (→ ``w / n``); ideal drives (gain 1), no mass information, no spin
+        torque and no kick size (the robust family's)."""
         norm2 = x[0] * x[0] + x[1] * x[1]
-        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
     def enter(self, phase: Phase, k: int, schedule: Schedule) -> None:
         super().enter(phase, k, schedule)
@@ -68,7 +68,9 @@ class PaperPipeline(EstimationPipeline):
             self.forgetting,
         )
 
-    def _update_com(self, alpha: float, sign: float, span: float, added: Vec2) -> None:
+    def _update_com(
+        self, alpha: float, sign: float, span: float, added: Vec2, torque: float = 0.0
+    ) -> None:
         self.com.update(self.omega, alpha, sign, span)  # eq. (18) reads ω
 
     def _new_mass(self, schedule: Schedule) -> MassEstimator:

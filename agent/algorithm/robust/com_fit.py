@@ -25,8 +25,10 @@ On a real floor the load turns against a friction torque ``−τ_c sgn ω``, and
 constant torque of its own that keeps it turning (:mod:`agent.algorithm.robust.phases`): while
 the load turns one way (``s_ω``) both are a constant ``d`` in ``θ̈``, so a fifth column
 ``Σ_ω = ∫∫ s_ω`` with the unknown ``d`` takes them up (0 on a frictionless floor without that
-torque). The torque of friction's force about the COM vanishes to first order in
-``‖ṗ_C‖ / (|ω| r)`` (docs/estimator.md, "Friction"), which the experiment keeps small.
+torque). The brake the team adds to that torque as the turn nears ``max_turn_rate``, ``τ_b(t)``,
+is known to every robot: its turn ``∫∫ τ_b / J`` is taken out of the angle. The torque of
+friction's force about the COM vanishes to first order in ``‖ṗ_C‖ / (|ω| r)``
+(docs/estimator.md, "Friction"), which the experiment keeps small.
 
 Uncertainty: the fit's ``σ̂² M⁻¹`` for ``c``, scaled for the angle's correlated errors as in
 :mod:`agent.algorithm.robust.inertia_fit`
@@ -52,6 +54,7 @@ class ComFit(RunFit):
         super().__init__(5, forgetting)
         k = n / moment
         self.k = k
+        self.n = n
         self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
         self.lag = lag
         self.started = False
@@ -67,6 +70,9 @@ class ComFit(RunFit):
         self._spin_once = 0.0
         self._spin_twice = 0.0
         """``Σ_ω = ∫∫ sgn ω`` since the first sample."""
+        self._torque_once = 0.0
+        self._torque_twice = 0.0
+        """``∫∫ τ/J`` since the first sample: the turn of the known torque, taken out of α."""
 
     def regressor(self, alpha: float) -> Vec2:
         """``φ = (n/J) R(−α) Qᵀ f``."""
@@ -80,11 +86,13 @@ class ComFit(RunFit):
         *,
         added: Vec2 = (0.0, 0.0),
         spin: float = 1.0,
+        torque: float = 0.0,
     ) -> None:
         """Feed the rotation ``α`` since the push began, at the end of an interval ``dt``
         during which the team pushed with the mean sign ``sign``, each robot added the
-        mean force ``added`` and the load turned the way ``spin`` (the first call, at the
-        push's first instant, starts)."""
+        mean force ``added``, the team a mean torque ``torque`` about the COM beyond the
+        constant ``d`` (N m: the brake as the turn nears ``max_turn_rate``) and the load
+        turned the way ``spin`` (the first call, at the push's first instant, starts)."""
         k = self.k
         ax, ay = k * added[1], -k * added[0]  # (n/J) Qᵀ a
         c, s = math.cos(-alpha), math.sin(-alpha)  # R(−α)
@@ -106,6 +114,9 @@ class ComFit(RunFit):
             self._once = (ox + h * (p0x + phx), oy + h * (p0y + phy))
             self._spin_twice += self._spin_once * dt + 0.5 * spin * dd
             self._spin_once += spin * dt
+            u = torque * k / self.n  # τ / J
+            self._torque_twice += self._torque_once * dt + 0.5 * u * dd
+            self._torque_once += u * dt
             self.t += dt
         self.started = True
         self._alpha, self._turned, self._regressor = alpha, (c, s), (px, py)
@@ -119,7 +130,7 @@ class ComFit(RunFit):
                 sy - lag * oy + lag2 * py + lagged * ey,
                 self._spin_twice,
             ),
-            alpha,
+            alpha - self._torque_twice,
         )
         self._solve()
 

@@ -3,14 +3,21 @@
 - *excite*: a floor may hold the load against the kick that starts Step 1, and the spin-up
   (a force in proportion to the contacts' relative velocities) has nothing to work on while the
   load is still. So the kick goes on for as long as the load does not move, growing (doubling
-  every ``kick_duration_s``, up to ``max_force``) and taking another seeded direction every
-  ``kick_duration_s`` (another wrench), until the robot's contact, or its velocity relative to
-  a neighbour's, filtered over :data:`MOVING_TIME_CONSTANT_S`, is faster than
-  ``breakaway_speed``; the spin-up's gain is then that kick's level ``A_i`` times its setting
-  (``spin_gain A_i / kick_force``), so that it keeps the load turning against the floor, and
-  the kick comes back whenever the load stops. A load that ``max_force``'s kick has not moved
-  within ``breakaway_s`` is held by its floor: the robot stops pushing (:attr:`RobustPhases.
-  held`) and the run ends with "cannot break the load away". Each robot also filters its
+  every ``kick_duration_s`` after the first, up to ``max_force``) and taking another seeded
+  direction every ``kick_duration_s`` (another wrench), until the robot's contact, or its
+  velocity relative to a neighbour's, filtered over :data:`MOVING_TIME_CONSTANT_S`, is faster
+  than ``breakaway_speed``, and no longer (a light load kicked for all of ``kick_duration_s``
+  was thrown at 1.8 m/s); the kick comes back whenever the load stops. The spin-up's gain is
+  the team's mean kick size ``Ā`` times its setting (``spin_gain Ā / kick_force``), so that it
+  keeps the load turning against the floor, the same on every robot, and each edge's term is
+  bounded alike at both its ends (:meth:`RobustPhases._spin_up_edges`): the terms then cancel
+  in pairs, and the spin-up is a torque with no net force, which a robot's own gain or its
+  saturation broke (generated load 54, 47 kg: a net force of 9 N and 3.7 m of travel in Step
+  1). It speeds the turn up less as ``|ω̂|`` nears ``max_turn_rate``, and the brake
+  ``−b ṗ_Ci`` fades out over :data:`EXCITE_BRAKE_S` after the last kick. A load that
+  ``max_force``'s kick has not moved within ``breakaway_s`` is held by its floor: the robot
+  stops pushing (:attr:`RobustPhases.held`) and the run ends with "cannot break the load
+  away". Each robot also filters its
   torque about the centroid in the spin-up, ``τ_i = z_i × f_i``
   (:attr:`RobustPhases.spin_torque`); the team averages it (``mean_spin_torque``,
   :mod:`agent.platform.team`), and once Step 1 has settled (a steady turn) ``τ̂₁ = n |τ̄|`` is
@@ -29,10 +36,11 @@
   z_i⊥`` (eq. 14's form: no net force, torque ``s_ω τ̂_c``, ``τ̂_c`` Step 4's estimate when
   the push began), so that Step 5's stage sees a load that turns fast compared with its COM's
   speed, where friction is a torque alone to first order (docs/estimator.md, "On a real floor:
-  friction"); the push runs in stages (:meth:`_push_stage`), Step 7's in translation, where
-  the torque ``−n ẑ_C × c`` makes the common force ``c`` act through the COM that Step 5
-  found rather than the contacts' centroid, and the turn is damped
-  (:meth:`RobustPhases._not_turning`); with
+  friction"), less a brake as the turn nears ``max_turn_rate`` (:meth:`RobustPhases.
+  _keep_turning`: the push, off the COM, swings the turn); the push runs in stages
+  (:meth:`_push_stage`), Step 7's in translation, where the torque ``−n ẑ_C × c`` makes the
+  common force ``c`` act through the COM that Step 5 found rather than the contacts'
+  centroid, and the turn is damped (:meth:`RobustPhases._not_turning`); with
   ``push_damping = b`` each robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity
   at the estimation instant (which every robot estimates alike), so that a light load's speed
   stays within about ``f/b`` and a heavy one's drift dies out (Steps 5 and 7 take the force as
@@ -54,7 +62,7 @@ from __future__ import annotations
 
 import math
 
-from agent.algorithm.estimation.excitation import kick_force, spin_up_force
+from agent.algorithm.estimation.excitation import capped_spin_up_force, kick_force
 from agent.algorithm.estimation.inertia import inertia_force
 from agent.algorithm.interfaces import OwnEstimates
 from agent.algorithm.phase_machine import Law, PhaseMachine, Ready, _never_ready
@@ -93,6 +101,22 @@ load 49, 39 kg on μ = 1.3 %: m̂ 6.7 % off; with 4, 0.06 %). More speeds the lo
 its floor where the friction is high: with 5, the paper's load on casters at μ = 5 % reached
 2.6 m/s, with 4, 1.7 m/s (the push reverses every ``push_flip_s``, and its speed grows by
 ``(PUSH_FRICTION_MARGIN − 1) μ g`` a second)."""
+PLAUSIBLE_TURNS = 4.0
+"""Step 1's spin-up fades as ``|ω̂|`` nears ``max_turn_rate`` (:meth:`RobustPhases._turn_room`),
+unless ``|ω̂|`` is more than this many times it: the arcs' first guesses, before the load has
+turned, divide by a distance of almost nothing (hundreds of rad/s)."""
+EXCITE_BRAKE_S = 5.0
+"""s: Step 1's spin-up adds the brake ``−b ṗ_Ci`` (``brake_gain``) after the robot's last kick,
+fading linearly from whole to none over this long: it takes out the kick's drift, and no more.
+Braking every contact's velocity makes the load turn about the contacts' centroid rather than
+its COM; a COM far from that centroid then orbits it and meets the floor's friction at that arm,
+which Step 1 measures as the floor's friction torque (generated load 47, 10.5 kg under 3 robots,
+its COM 1.8 m from their centroid: 3.9 m of travel in Step 1 and 7.9 N m measured for its
+1.33 N m, the verdict that the team could not move it). Cut at once, the brake leaves the COM
+with the orbit's speed, a drift that no friction takes out of a load on a frictionless floor
+(the paper's load on casters, ``μ`` = 0: 8.7 m of travel); faded over 5 s the turn's centre
+moves to the COM slowly enough that the drift goes with it (travel within 2.8 m), and the
+brake is gone before the turn Step 1 measures (load 47, faded over 8 s: the verdict again)."""
 TURN_STOP_SHARE = 0.2
 """The brake stage before Step 7's translation stops the load's turn with the time constant
 ``TURN_STOP_SHARE × translate_brake_s`` (``e⁻⁵`` of it left by the end): the contacts' brake
@@ -155,27 +179,34 @@ class RobustPhases(PhaseMachine):
         self.held = False
         """Whether ``max_force``'s kick has not moved the load within ``breakaway_s``: the
         floor holds it, and this robot pushes no more."""
-        self.kick_level = config.tuning.kick_force
-        """N: ``A_i``, the kick's size (grown while the load did not move)."""
         self.spin_torque = 0.0
         """N m: ``τ_i``, this robot's torque ``z_i × f_i`` about the centroid in Step 1's
         spin-up, filtered over :data:`SPIN_TORQUE_TIME_CONSTANT_S`."""
         self.push_level = 1.0
         """The push's ``f`` is ``push_force`` times this (fixed at the start of Step 4)."""
+        self.excite_brake_ticks = max(round(EXCITE_BRAKE_S / dt), 1)
+        self.degree = max(len(config.neighbours), 1)
+        self._kicked = 0
+        """The last tick of Step 1 at which this robot kicked."""
         super().__init__(config, barrier)
 
     # ---------------------------------------------------------------- Step 1: break away
     def _excite_force(self, k: int, own: OwnEstimates, velocity: Vec2) -> Vec2:
-        """The kick, growing for as long as the load does not move, else the spin-up (its gain
-        times the kick's level) and the damping; nothing once the floor is found to hold the
-        load."""
+        """The kick, growing for as long as the load does not move, else the spin-up
+        (:meth:`_spin_up_edges`) with the brake fading out over :data:`EXCITE_BRAKE_S` after
+        the last kick; nothing once the floor is found to hold the load."""
         moving = self._moving(own, velocity)
         t = self.tuning
-        if k >= self.kick_ticks and moving:
-            gain = t.spin_gain * (self.kick_level / t.kick_force)
-            spin = spin_up_force(gain, t.spin_speed, own.zdot.values())
-            brake = self._brake_force(k, own, velocity)
-            force = saturate((spin[0] + brake[0], spin[1] + brake[1]), t.max_force)
+        if moving:
+            spin = self._spin_up_edges(own)
+            share = 1.0 - (k - self._kicked) / self.excite_brake_ticks
+            if share > 0.0:
+                brake = self._brake_force(k, own, velocity)
+                force = saturate(
+                    (spin[0] + share * brake[0], spin[1] + share * brake[1]), t.max_force
+                )
+            else:
+                force = spin
             z = own.centroid
             self.spin_torque += self._torque_filter * (
                 z[0] * force[1] - z[1] * force[0] - self.spin_torque
@@ -188,8 +219,29 @@ class RobustPhases(PhaseMachine):
             attempt, left = divmod(still, self.kick_ticks)
             if left == 0:  # another direction, another wrench
                 self.kick = kick_force(self.seed, self.robot, t.kick_force, attempt)
+        self._kicked = k
         scale = self.kick_level / t.kick_force
         return (scale * self.kick[0], scale * self.kick[1])
+
+    def _spin_up_edges(self, own: OwnEstimates) -> Vec2:
+        """The spin-up (:func:`~agent.algorithm.estimation.excitation.capped_spin_up_force`)
+        with the gain ``spin_gain Ā / kick_force``, ``Ā`` the team's mean kick size
+        (``mean_kick_level``), and each edge's term within ``max_force / max(d_i, d_j)``: the
+        same gain and cap at both ends of every edge, so that the terms cancel in pairs. The
+        terms that speed the turn up fade as ``|ω̂|`` (the team's) nears ``max_turn_rate``
+        (:meth:`_turn_room`; a light, compact load spun at 2.6 rad/s), unless ``|ω̂|`` is
+        beyond :data:`PLAUSIBLE_TURNS` times it."""
+        t = self.tuning
+        level = max(own.mean_kick_level, t.kick_force)
+        gain = t.spin_gain * level / t.kick_force
+        own_degree = self.degree
+        edges = (
+            (zdot, t.max_force / max(own_degree, self.degrees.get(j, own_degree)))
+            for j, zdot in own.zdot.items()
+        )
+        omega = abs(own.omega or 0.0)
+        drive = self._turn_room(omega) if omega < PLAUSIBLE_TURNS * t.robust.max_turn_rate else 1.0
+        return capped_spin_up_force(gain, t.spin_speed, edges, drive)
 
     def _grow_kick(self) -> None:
         """One tick of the load still after the kick's first ``kick_duration_s``: the kick
@@ -384,7 +436,7 @@ class RobustPhases(PhaseMachine):
             turning = self._not_turning(k, own, common)
             part = _within(common, turning, most)
             return (common[0] + part * turning[0], common[1] + part * turning[1])
-        turning = self._keep_turning(k, own)
+        turning = self._keep_turning(k, own, record=True)
         push = (push[0] + turning[0], push[1] + turning[1])
         if not damped:
             return push
@@ -410,13 +462,27 @@ class RobustPhases(PhaseMachine):
         gain = -b * (own.omega or 0.0) - push_torque / w
         return inertia_force(gain, self._turned_centroid(k, own))
 
-    def _keep_turning(self, k: int, own: OwnEstimates) -> Vec2:
-        """``s_ω (τ̂_c / w) z_i⊥``, ``z_i`` turned to the middle of tick ``k``: the team's torque
-        ``s_ω τ̂_c`` against the floor's friction (zero on a frictionless floor)."""
+    def _keep_turning(self, k: int, own: OwnEstimates, record: bool = False) -> Vec2:
+        """``(τ/w) z_i⊥``, ``z_i`` turned to the middle of tick ``k``, with the team's torque
+        ``τ = s_ω τ̂_c`` against the floor's friction (zero on a frictionless floor) while the
+        load turns slower than ``1 − TURN_RATE_TAPER`` of ``max_turn_rate`` in the spin's
+        direction, less a brake that grows linearly from there to ``τ̂_c`` plus Step 4's torque
+        at ``max_turn_rate`` (and beyond): the push, acting off the COM, swings the turn, by
+        more than the floor's friction on a light load pushed hard (generated load 22, 3.5 kg
+        on μ = 2.7 %: 2.2 rad/s without the brake, 1.6 with it). With ``record`` (Step 5's
+        swing) the brake's torque is recorded as the team's for tick ``k``
+        (:meth:`mean_torque`): Step 5's fit takes its turn out of the angle."""
         w = self.n * own.mean_square_offset
-        if not self.friction_used > 0.0 or not w > 0.0:
+        if not w > 0.0:
             return (0.0, 0.0)
-        return inertia_force(self.spin_sign * self.friction_used / w, self._turned_centroid(k, own))
+        brake = 1.0 - self._turn_room(self.spin_sign * (own.omega or 0.0))
+        braking = brake * (self.friction_used + abs(self.inertia_torque))
+        if record:
+            self._torque[k] = -self.spin_sign * braking
+        torque = self.friction_used - braking
+        if torque == 0.0:
+            return (0.0, 0.0)
+        return inertia_force(self.spin_sign * torque / w, self._turned_centroid(k, own))
 
     # ---------------------------------------------------------------- once done: probes
     def _done_laws(self) -> tuple[Ready, Law]:

@@ -64,6 +64,8 @@ class RobustPipeline(EstimationPipeline):
         team's mass."""
         self._torque_input = 0.0
         """This robot's torque in Step 1's spin-up, the input of the team's mean."""
+        self._kick_input = config.tuning.kick_force
+        """This robot's kick size in Step 1, the input of the team's mean."""
         super().__init__(config, neighbours)
         self.rotation = RotationConsensus(len(neighbours), config.n)
         """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
@@ -151,11 +153,14 @@ class RobustPipeline(EstimationPipeline):
         edge.update(zdot, dt, follow=False)  # its direction follows the team's rotation
 
     def _inputs(self, x: Vec2) -> Sequence[float]:
-        return inputs(x, self.drive.estimate, self._mass_input, self._torque_input)
+        return inputs(
+            x, self.drive.estimate, self._mass_input, self._torque_input, self._kick_input
+        )
 
     def _before_consensus(self, schedule: Schedule) -> None:
         self._mass_input = mass_input(*self._own_mass())  # the input of the team's (Step 7)
         self._torque_input = schedule.spin_torque
+        self._kick_input = schedule.kick_level
 
     def _turn(
         self, zdots: dict[int, Vec2], interval: float, inbox: Inbox, ref: int | None
@@ -243,8 +248,10 @@ class RobustPipeline(EstimationPipeline):
         self.lag = self.inertia.lag  # the drives' lag, which Step 4's fit found
         return ComFit(self.n, schedule.moment_used, schedule.push, self.forgetting, self.lag)
 
-    def _update_com(self, alpha: float, sign: float, span: float, added: Vec2) -> None:
-        self.com.update(alpha, sign, span, added=added, spin=self._spin)
+    def _update_com(
+        self, alpha: float, sign: float, span: float, added: Vec2, torque: float = 0.0
+    ) -> None:
+        self.com.update(alpha, sign, span, added=added, spin=self._spin, torque=torque)
 
     def _new_mass(self, schedule: ProbeSchedule) -> MassFit:
         return MassFit(self.n, schedule.push, self.forgetting, self.lag)

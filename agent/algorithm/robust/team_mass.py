@@ -55,16 +55,21 @@ def mass_input(mass: float | None, std: float | None) -> tuple[float, float, flo
 
 
 def inputs(
-    x: Vec2, gain: float, mass: tuple[float, float, float, float], torque: float
+    x: Vec2,
+    gain: float,
+    mass: tuple[float, float, float, float],
+    torque: float,
+    kick: float,
 ) -> tuple[float, ...]:
     """A robot's inputs of the team's means, in declaration order
     (:data:`agent.platform.team.TEAM_QUANTITIES`): ``‖x_i‖²`` (→ ``w / n``), ``g_i``,
-    ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i``, ``ι_i ln m_i``, ``ι_i (ln m_i)²`` and
-    ``τ_i``, for its offsets iterate ``x``, its drive's gain, its mass input
-    (:func:`mass_input`) and its torque in Step 1's spin-up
-    (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`)."""
+    ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i``, ``ι_i ln m_i``, ``ι_i (ln m_i)²``,
+    ``τ_i`` and ``A_i``, for its offsets iterate ``x``, its drive's gain, its mass input
+    (:func:`mass_input`), its torque in Step 1's spin-up
+    (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`) and its kick's size
+    (:attr:`~agent.algorithm.robust.phases.RobustPhases.kick_level`)."""
     norm2 = x[0] * x[0] + x[1] * x[1]
-    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, *mass, torque)
+    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, *mass, torque, kick)
 
 
 def team_mass(information: float, weighted: float, own: float) -> tuple[float, float] | None:

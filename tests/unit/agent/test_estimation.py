@@ -26,7 +26,7 @@ from agent.algorithm.estimation.com_observer import ComObserver
 from agent.algorithm.estimation.com_velocity import com_velocity
 from agent.algorithm.estimation.consensus import metropolis_weight
 from agent.algorithm.estimation.estimator import Estimator
-from agent.algorithm.estimation.excitation import kick_force, spin_up_force
+from agent.algorithm.estimation.excitation import capped_spin_up_force, kick_force, spin_up_force
 from agent.algorithm.estimation.inertia import inertia_force
 from agent.algorithm.estimation.settling import SettleDetector, SettleDetectors
 from agent.algorithm.estimation.team_consensus import TeamConsensus
@@ -489,7 +489,7 @@ class Member(TeamConsensus):
     def __init__(self, robot: int, neighbours):
         self.gain_input, self.mass_input = 1.0, (0.0, 0.0, 0.0, 0.0)
         super().__init__(
-            robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input, 0.0)
+            robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input, 0.0, 0.0)
         )
 
     xi = property(lambda self: self["mean_square_offset"])
@@ -1023,6 +1023,16 @@ def test_settle_uses_floor_near_zero():
 # --------------------------------------------------------------------------------------------
 
 
+def _random_connected_edges(rng, n: int) -> set[tuple[int, int]]:
+    """A random spanning path of ``n`` nodes plus up to ``n − 1`` random extra edges."""
+    order = rng.permutation(n)
+    edges = {tuple(sorted((int(order[i]), int(order[i + 1])))) for i in range(n - 1)}
+    for _ in range(int(rng.integers(0, n))):
+        i, j = rng.choice(n, size=2, replace=False)
+        edges.add((int(min(i, j)), int(max(i, j))))
+    return edges
+
+
 @FAST
 @given(
     st.integers(0, 10_000),
@@ -1036,11 +1046,7 @@ def test_spin_up_force_net_force_and_torque(seed, speed, negative, gain, target)
     omega = -speed if negative else speed
     n = int(rng.integers(2, 7))
     p = rng.uniform(-2, 2, size=(n, 2))
-    order = rng.permutation(n)
-    edges = {tuple(sorted((int(order[i]), int(order[i + 1])))) for i in range(n - 1)}
-    for _ in range(int(rng.integers(0, n))):
-        i, j = rng.choice(n, size=2, replace=False)
-        edges.add((int(min(i, j)), int(max(i, j))))
+    edges = _random_connected_edges(rng, n)
     nb = neighbours_of(n, sorted(edges))
     ref, v = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 2)
     vel = [v + omega * (Q @ (p[i] - ref)) for i in range(n)]  # rigid-body velocities
@@ -1056,6 +1062,52 @@ def test_spin_up_force_net_force_and_torque(seed, speed, negative, gain, target)
     for q in (np.zeros(2), rng.uniform(-5, 5, 2)):
         torque = sum((Q @ (p[i] - q)) @ forces[i] for i in range(n))
         assert torque == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+@FAST
+@given(st.integers(0, 10_000), st.floats(0.05, 3.0), st.floats(1.0, 60.0), st.floats(0.0, 1.0))
+def test_capped_spin_up_force_bounds_each_robot_and_keeps_no_net_force(seed, speed, gain, drive):
+    """Each edge's term within ``max_force / max(d_i, d_j)``: no robot's sum beyond
+    ``max_force``, and the terms still cancel in pairs (no net force), at gains that would
+    otherwise ask for several times ``max_force``."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 8))
+    p = rng.uniform(-2, 2, size=(n, 2))
+    edges = _random_connected_edges(rng, n)
+    nb = neighbours_of(n, sorted(edges))
+    degree = [len(nb[i]) for i in range(n)]
+    v = rng.uniform(-1, 1, 2)
+    vel = [v + speed * (Q @ p[i]) for i in range(n)]
+    most = 10.0
+    forces = np.array(
+        [
+            capped_spin_up_force(
+                gain,
+                1.0,
+                [(tuple(vel[i] - vel[j]), most / max(degree[i], degree[j])) for j in nb[i]],
+                drive,
+            )
+            for i in range(n)
+        ]
+    )
+    assert np.abs(forces.sum(axis=0)).max() < 1e-9
+    assert np.linalg.norm(forces, axis=1).max() <= most * (1 + 1e-12)
+    # Uncapped and at full drive, the capped law is the plain one.
+    plain = [spin_up_force(gain, 1.0, [tuple(vel[i] - vel[j]) for j in nb[i]]) for i in range(n)]
+    roomy = [
+        capped_spin_up_force(gain, 1.0, [(tuple(vel[i] - vel[j]), math.inf) for j in nb[i]])
+        for i in range(n)
+    ]
+    assert np.allclose(roomy, plain, rtol=1e-12, atol=1e-12)
+
+
+def test_capped_spin_up_force_drive_fades_only_the_terms_that_speed_the_turn_up():
+    slow, fast = (0.3, 0.0), (0.0, 1.5)  # below and beyond the target speed of 1 m/s
+    assert capped_spin_up_force(10.0, 1.0, [(slow, math.inf)], drive=0.0) == (0.0, 0.0)
+    half = capped_spin_up_force(10.0, 1.0, [(slow, math.inf)], drive=0.5)
+    assert half == pytest.approx((0.5 * 10.0 * 0.7 * 0.3, 0.0))
+    braking = capped_spin_up_force(10.0, 1.0, [(fast, math.inf)], drive=0.0)
+    assert braking == pytest.approx((0.0, 10.0 * (1.0 - 1.5) * 1.5))
 
 
 def test_kick_force_magnitude_and_determinism():

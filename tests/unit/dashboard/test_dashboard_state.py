@@ -313,7 +313,7 @@ EXAMPLES = [
         6,
         Barrier(Phase.INERTIA, 3, 9, levels=(3, 5)),
         ConsensusState(centroid_offset=(1.0, 2.0), mean_square_offset=3.0),
-        ((1, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.4, 2.0, 10.0, 1.6, 2.6, 0.5),),
+        ((1, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.4, 2.0, 10.0, 1.6, 2.6, 0.5, 4.0),),
     ),
     Clock(7, 0.07),
     Estimates(2, 7, Phase.PUSH, 5, 0.4, {1: (1.0, 2.0)}, (0.5, 0.5), 2.0, 12.0, mass=5.0),
