@@ -50,10 +50,10 @@ Step 1's spin-up became a torque with no net force and Step 5's fit took in the 
 its own), 2.42 for ``contact_to_com``, 2.78 for ``moment``, 12.5 for ``friction_torque`` and
 701 for ``coulomb``, 39 of the 40 runs done (the factors before were 1.73, 1.31, 3.28, 1.72,
 29 and 487; ``m̂``'s is now set by a few loads whose robots agree on a mass the fit trades
-against ``μ̂``, as generated load 49's). With these factors the runs of seeds 40–79 held the truth 94.0 % of the
-time for ``m̂``, 93.1 % for ``Ĵ``, 95.0 % for ``contact_to_com``, 85.1 % for each robot's
-``z_ij`` at once, 89.9 % for ``τ̂_c`` and 91.3 % for ``μ̂``; those of seeds 80–119 100 %,
-93.5 %, 92.1 %, 90.7 %, 96.7 % and 98.1 %."""
+against ``μ̂``, as generated load 49's). With these factors the runs of seeds 40–79 held the
+truth 94.0 % of the time for ``m̂``, 93.1 % for ``Ĵ``, 95.0 % for ``contact_to_com``, 85.1 %
+for each robot's ``z_ij`` at once, 89.9 % for ``τ̂_c`` and 91.3 % for ``μ̂``; those of seeds
+80–119 100 %, 93.5 %, 92.1 %, 90.7 %, 96.7 % and 98.1 %."""
 
 
 @dataclass(frozen=True)
