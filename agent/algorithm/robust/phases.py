@@ -114,9 +114,10 @@ which Step 1 measures as the floor's friction torque (generated load 47, 10.5 kg
 its COM 1.8 m from their centroid: 3.9 m of travel in Step 1 and 7.9 N m measured for its
 1.33 N m, the verdict that the team could not move it). Cut at once, the brake leaves the COM
 with the orbit's speed, a drift that no friction takes out of a load on a frictionless floor
-(the paper's load on casters, ``μ`` = 0: 8.7 m of travel); faded over 5 s the turn's centre
-moves to the COM slowly enough that the drift goes with it (travel within 2.8 m), and the
-brake is gone before the turn Step 1 measures (load 47, faded over 8 s: the verdict again)."""
+(the paper's load on casters, ``μ`` = 0, seed 28: 8.7 m of travel); faded over 5 s the turn's
+centre moves to the COM slowly enough that most of the drift goes with it (seeds 28, 32 and 33:
+within 2.8 m; seed 12 keeps 0.3 m/s and leaves its floor), and the brake is gone before the
+turn Step 1 measures (load 47, faded over 8 s: the verdict again)."""
 TURN_STOP_SHARE = 0.2
 """The brake stage before Step 7's translation stops the load's turn with the time constant
 ``TURN_STOP_SHARE × translate_brake_s`` (``e⁻⁵`` of it left by the end): the contacts' brake
