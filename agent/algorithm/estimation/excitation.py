@@ -14,8 +14,8 @@ without knowing any geometry.
    Each edge's term may be bounded by a cap both of its ends compute alike
    (:func:`capped_spin_up_force`): with ``max_force / max(d_i, d_j)``, ``d`` the robots' degrees,
    no robot's sum exceeds ``max_force``, so none is cut by its saturation, which would break the
-   cancellation (a generated load of 47 kg under 4 robots whose edge terms were 12 N each got
-   a net force of 9 N, and travelled 3.7 m in Step 1).
+   cancellation (a generated load of 47 kg under 4 robots, each robot's sum cut at
+   ``max_force``, met a net force of about 9 N and travelled 3.7 m in Step 1).
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ class ComFit(RunFit):
         super().__init__(5, forgetting)
         k = n / moment
         self.k = k
-        self.n = n
+        self.inverse_moment = 1.0 / moment
         self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
         self.lag = lag
         self.started = False
@@ -114,7 +114,7 @@ class ComFit(RunFit):
             self._once = (ox + h * (p0x + phx), oy + h * (p0y + phy))
             self._spin_twice += self._spin_once * dt + 0.5 * spin * dd
             self._spin_once += spin * dt
-            u = torque * k / self.n  # τ / J
+            u = torque * self.inverse_moment  # τ / J
             self._torque_twice += self._torque_once * dt + 0.5 * u * dd
             self._torque_once += u * dt
             self.t += dt

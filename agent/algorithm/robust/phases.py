@@ -112,9 +112,9 @@ Braking every contact's velocity makes the load turn about the contacts' centroi
 its COM; a COM far from that centroid then orbits it and meets the floor's friction at that arm,
 which Step 1 measures as the floor's friction torque (generated load 47, 10.5 kg under 3 robots,
 its COM 1.8 m from their centroid: 3.9 m of travel in Step 1 and 7.9 N m measured for its
-1.33 N m, the verdict that the team could not move it). Cut at once, the brake leaves the COM
-with the orbit's speed, a drift that no friction takes out of a load on a frictionless floor
-(the paper's load on casters, ``μ`` = 0, seed 28: 8.7 m of travel); faded over 5 s the turn's
+1.33 N m, the verdict that the team could not move it). Cut off 3 s after the kick, the brake
+left the COM with the orbit's speed, a drift that no friction takes out on a frictionless floor
+(the paper's load on casters, ``μ`` = 0, seed 28: 8.7 m of travel); faded over 5 s, the turn's
 centre moves to the COM slowly enough that most of the drift goes with it (seeds 28, 32 and 33:
 within 2.8 m; seed 12 keeps 0.3 m/s and leaves its floor), and the brake is gone before the
 turn Step 1 measures (load 47, faded over 8 s: the verdict again)."""

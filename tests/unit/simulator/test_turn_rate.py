@@ -9,21 +9,15 @@ from __future__ import annotations
 
 import math
 
+from agent.platform.evaluation import planar_interval
 from agent.platform.protocol import Phase
 from simulator.inprocess import run_inprocess
 from tests.helpers.floor import generated_on_floor
 
-CHI2_2_95 = 5.991
-"""χ²₂'s 95 % quantile: a planar error within the published 95 % ellipse."""
-
 
 def inside_ellipse(est, truth) -> bool:
-    """Whether ``truth`` lies in the 95 % ellipse of ``est.contact_to_com``."""
-    dx = est.contact_to_com[0] - truth[0]
-    dy = est.contact_to_com[1] - truth[1]
-    xx, xy, yy = est.contact_to_com_cov
-    det = xx * yy - xy * xy
-    return det > 0.0 and (yy * dx * dx - 2.0 * xy * dx * dy + xx * dy * dy) / det <= CHI2_2_95
+    """Whether ``truth`` lies in the published 95 % ellipse of ``est.contact_to_com``."""
+    return planar_interval(est.contact_to_com, est.contact_to_com_cov, truth)[1] is True
 
 
 SEED = 11
