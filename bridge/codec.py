@@ -28,13 +28,17 @@ from crc import Calculator, Crc8
 
 from bridge.dbc import (
     APPLIED_FORCE_BASE,
-    DBC_PATH,
+    DBC_PATHS,
     FORCE_COMMAND_BASE,
+    FORCE_TORQUE_BASE,
     FRAME_LENGTH,
     HEARTBEAT_BASE,
     MAX_FORCE,
     MAX_NODE,
+    MOTION_COMMAND_BASE,
+    MOTION_FEEDBACK_BASE,
     ODOMETRY_BASE,
+    PROFILES,
     SYNC_ID,
 )
 
@@ -51,6 +55,7 @@ REASONS = (
     "wrong length",
     "checksum",
     "out of range",
+    "wrong profile",
 )
 """Why :meth:`AgvCodec.decode` rejects a frame (the bridge's counter keys)."""
 
@@ -117,12 +122,58 @@ class Heartbeat:
     faults: int = 0
 
 
-Frame = Sync | Odometry | ForceCommand | AppliedForce | Heartbeat
+@dataclass(frozen=True, slots=True)
+class MotionCommand:
+    """The velocity (m/s, world frame) AGV ``node``'s base drives at from the tick whose
+    counter is ``counter`` (velocity profile); ``drive`` false is STOP (brake to standstill,
+    whatever ``velocity`` says)."""
+
+    node: int
+    counter: int
+    velocity: Vec2
+    drive: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class MotionFeedback:
+    """AGV ``node``'s measured base velocity (m/s, world frame) at the tick whose counter is
+    ``counter`` (velocity profile)."""
+
+    node: int
+    counter: int
+    velocity: Vec2
+
+
+@dataclass(frozen=True, slots=True)
+class ForceTorque:
+    """The raw force (N, world frame) the sensor at AGV ``node``'s contact measured at the tick
+    whose counter is ``counter`` (velocity profile), and its ``status`` bits
+    (:data:`bridge.dbc.SENSOR_STATUS_BITS`)."""
+
+    node: int
+    counter: int
+    force: Vec2
+    status: int = 0
+
+
+Frame = (
+    Sync
+    | Odometry
+    | ForceCommand
+    | AppliedForce
+    | MotionCommand
+    | MotionFeedback
+    | ForceTorque
+    | Heartbeat
+)
 
 _BASES = {
     ODOMETRY_BASE: Odometry,
     FORCE_COMMAND_BASE: ForceCommand,
     APPLIED_FORCE_BASE: AppliedForce,
+    MOTION_COMMAND_BASE: MotionCommand,
+    MOTION_FEEDBACK_BASE: MotionFeedback,
+    FORCE_TORQUE_BASE: ForceTorque,
     HEARTBEAT_BASE: Heartbeat,
 }
 _BASE_OF = {kind: base for base, kind in _BASES.items()}
@@ -148,11 +199,21 @@ def checksum(frame_id: int, data: bytes) -> int:
 
 
 class AgvCodec:
-    """Encodes and decodes the frames of ``bridge/agv.dbc``."""
+    """Encodes the frames of both profiles; decodes those of ``profile`` (``force``: the
+    frames of ``bridge/agv.dbc``, ``velocity``: of ``bridge/agv-velocity.dbc``) and refuses
+    the other's as ``wrong profile``."""
 
-    def __init__(self, path: Path = DBC_PATH):
-        self.database = cantools.database.load_file(str(path), strict=True)
-        self._messages = {m.frame_id: m for m in self.database.messages}
+    def __init__(self, profile: str = "force", paths: dict[str, Path] | None = None):
+        if profile not in PROFILES:
+            raise ValueError(f"profile must be one of {', '.join(PROFILES)}, got {profile!r}")
+        paths = paths or DBC_PATHS
+        self.profile = profile
+        self.database = cantools.database.load_file(str(paths[profile]), strict=True)
+        self._messages = {}
+        for other in PROFILES:
+            database = cantools.database.load_file(str(paths[other]), strict=True)
+            self._messages.update({m.frame_id: m for m in database.messages})
+        self._own = frozenset(m.frame_id for m in self.database.messages)
 
     # ------------------------------------------------------------------ encoding
     def encode(self, frame: Frame, timestamp: float = 0.0) -> can.Message:
@@ -202,6 +263,17 @@ class AgvCodec:
         if isinstance(frame, AppliedForce):
             fx, fy = frame.force
             return frame_id, {"Fx": fx, "Fy": fy, "Counter": frame.counter}
+        if isinstance(frame, MotionCommand):
+            vx, vy = frame.velocity if frame.drive else (0.0, 0.0)
+            mode = 1 if frame.drive else 0
+            return frame_id, {"Vx": vx, "Vy": vy, "Mode": mode, "Counter": frame.counter}
+        if isinstance(frame, MotionFeedback):
+            vx, vy = frame.velocity
+            return frame_id, {"Vx": vx, "Vy": vy, "Counter": frame.counter}
+        if isinstance(frame, ForceTorque):
+            fx, fy = frame.force
+            values = {"Fx": fx, "Fy": fy, "Status": frame.status, "Counter": frame.counter}
+            return frame_id, values
         return frame_id, {"Mode": frame.mode, "Faults": frame.faults, "Counter": frame.counter}
 
     # ------------------------------------------------------------------ decoding
@@ -217,6 +289,8 @@ class AgvCodec:
         message = self._messages.get(frame_id)
         if message is None:
             raise FrameError("unknown id", f"id 0x{frame_id:x}")
+        if frame_id not in self._own:
+            raise FrameError("wrong profile", f"{message.name} is not a {self.profile} frame")
         data = bytes(msg.data)
         if msg.dlc != FRAME_LENGTH or len(data) != FRAME_LENGTH:
             raise FrameError("wrong length", f"{message.name}: {len(data)} bytes, expected 8")
@@ -250,13 +324,32 @@ class AgvCodec:
             return ForceCommand(node, counter, force, apply)
         if kind is AppliedForce:
             return AppliedForce(node, counter, (values["Fx"], values["Fy"]))
+        if kind is MotionCommand:
+            drive = int(values["Mode"]) == 1
+            velocity = (values["Vx"], values["Vy"]) if drive else (0.0, 0.0)
+            return MotionCommand(node, counter, velocity, drive)
+        if kind is MotionFeedback:
+            return MotionFeedback(node, counter, (values["Vx"], values["Vy"]))
+        if kind is ForceTorque:
+            force = (values["Fx"], values["Fy"])
+            return ForceTorque(node, counter, force, int(values["Status"]))
         return Heartbeat(node, counter, int(values["Mode"]), int(values["Faults"]))
 
     # ------------------------------------------------------------------ quantisation
     def quantize_velocity(self, velocity: Vec2) -> Vec2:
-        """``velocity`` as a receiver decodes it from an :class:`Odometry` frame."""
-        return self.decode(self.encode(Odometry(1, 0, velocity))).velocity
+        """``velocity`` as a receiver decodes it from the profile's odometry frame
+        (:class:`Odometry` or :class:`MotionFeedback`, the same resolution)."""
+        kind = Odometry if self.profile == "force" else MotionFeedback
+        return self.decode(self.encode(kind(1, 0, velocity))).velocity
 
     def quantize_force(self, force: Vec2) -> Vec2:
-        """``force`` (within range) as a receiver decodes it from a force frame."""
-        return self.decode(self.encode(AppliedForce(1, 0, force))).force
+        """``force`` (within range) as a receiver decodes it from the profile's measured-force
+        frame (:class:`AppliedForce` or :class:`ForceTorque`, the same resolution)."""
+        if self.profile == "force":
+            return self.decode(self.encode(AppliedForce(1, 0, force))).force
+        return self.decode(self.encode(ForceTorque(1, 0, force))).force
+
+    def quantize_command_velocity(self, velocity: Vec2) -> Vec2:
+        """A velocity command (within ±:data:`~bridge.dbc.MAX_COMMAND_SPEED`) as the driver
+        decodes it from a :class:`MotionCommand` (velocity profile only)."""
+        return self.decode(self.encode(MotionCommand(1, 0, velocity))).velocity

@@ -19,6 +19,7 @@ from bridge.codec import (
     ForceCommand,
     FrameError,
     Heartbeat,
+    MotionCommand,
     Odometry,
     Sync,
     checksum,
@@ -26,7 +27,7 @@ from bridge.codec import (
 )
 from bridge.dbc import (
     APPLIED_FORCE_BASE,
-    DBC_PATH,
+    DBC_PATHS,
     DRIVER_MODES,
     FAULT_BITS,
     FORCE_COMMAND_BASE,
@@ -78,9 +79,10 @@ def reason_of(msg: can.Message) -> str:
 # ------------------------------------------------------------------------------ the DBC file
 def test_the_committed_dbc_is_what_dbc_py_builds() -> None:
     # Bytes, not text: cantools writes CRLF line ends, which text mode would translate.
-    assert DBC_PATH.read_bytes().decode("ascii") == build().as_dbc_string(), (
-        "bridge/agv.dbc is out of date: run python -m bridge.dbc"
-    )
+    for profile, path in DBC_PATHS.items():
+        assert path.read_bytes().decode("ascii") == build(profile).as_dbc_string(), (
+            f"{path.name} is out of date: run python -m bridge.dbc"
+        )
 
 
 # ------------------------------------------------------------------------------ round trips
@@ -245,6 +247,7 @@ CRAFTED = {
     "out of range driver mode": data_frame(0x720, set_nibble(BEAT, 0, False, 9)),
     "out of range sync counter": data_frame(SYNC_ID, set_nibble(SYNC, 6, True, 6)),
     "out of range velocity": data_frame(0x181, out_of_range_velocity()),
+    "wrong profile": AgvCodec("velocity").encode(MotionCommand(1, 3, (0.5, -0.5))),
 }
 
 
