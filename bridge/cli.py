@@ -67,11 +67,18 @@ def _add_bridge(commands: argparse._SubParsersAction) -> None:
         help="one robot's AGV bridge: its CAN bus <-> its agent over Zenoh",
         formatter_class=HelpFormatter,
         description=(
-            "Run one robot's AGV bridge: it reads the AGV driver's Odometry and AppliedForce\n"
-            "frames from the robot's CAN bus (bridge/agv.dbc), publishes each tick's pair as\n"
-            "the robot's measurement on Zenoh, and turns the agent's force commands into\n"
-            "ForceCommand frames. Its agent cannot tell it from the simulated plant. No valid\n"
-            "command for [can] watchdog_ms: it commands zero force until commands return.\n"
+            "Run one robot's AGV bridge: it reads each tick's velocity and force frames from\n"
+            "the robot's CAN bus, publishes them as the robot's measurement on Zenoh, and\n"
+            "turns the agent's force commands into command frames. Its agent cannot tell it\n"
+            "from the simulated plant. Two profiles ([can] profile):\n"
+            "  force     a driver that takes force commands (bridge/agv.dbc): Odometry and\n"
+            "            AppliedForce in, ForceCommand out;\n"
+            "  velocity  a base that takes velocity commands, with a force/torque sensor at\n"
+            "            its contact (bridge/agv-velocity.dbc): MotionFeedback and ForceTorque\n"
+            "            in, MotionCommand out; the bridge tares the sensor and closes an\n"
+            "            admittance loop ([can.admittance]) from the force to the velocity.\n"
+            "No valid command for [can] watchdog_ms: it commands zero force (velocity: STOP)\n"
+            "until commands return; velocity: a sensor silent or faulty that long, STOP too.\n"
             "Bad frames are counted and logged, never fatal; a bus that fails is reopened.\n"
             "It publishes its counters (BridgeStatus) four times a second.\n\n"
             "The config is the robot's robot.toml (as heft agent reads it) with a [can]\n"
@@ -88,7 +95,11 @@ def _add_bridge(commands: argparse._SubParsersAction) -> None:
             "  bitrate = 1000000         # bit/s\n"
             "  node = 1                  # CAN node id (default: the robot's id)\n"
             "  watchdog_ms = 100\n"
-            '  time_source = "sync"      # or "clock" (chrony/PTP-synchronised host clock)\n\n'
+            '  time_source = "sync"      # or "clock" (chrony/PTP-synchronised host clock)\n'
+            '  profile = "force"         # or "velocity"\n'
+            "  [can.admittance]          # velocity profile only (see docs/can-bridge.md)\n"
+            "  mass = 10.0               # kg, the virtual mass\n"
+            "  damping = 0.0             # N s/m\n\n"
             "example: heft bridge --config robot-1.toml --channel vcan1"
         ),
     )

@@ -33,6 +33,7 @@ from bridge.dbc import (
     FORCE_TORQUE_BASE,
     FRAME_LENGTH,
     HEARTBEAT_BASE,
+    MAX_COMMAND_SPEED,
     MAX_FORCE,
     MAX_NODE,
     MOTION_COMMAND_BASE,
@@ -182,12 +183,22 @@ _CALCULATORS = threading.local()
 two threads sharing one corrupt each other's checksums."""
 
 
+def _clamp(v: Vec2, bound: float) -> tuple[Vec2, bool]:
+    x = min(max(v[0], -bound), bound)
+    y = min(max(v[1], -bound), bound)
+    return (x, y), (x, y) != (v[0], v[1])
+
+
 def clamp_force(force: Vec2) -> tuple[Vec2, bool]:
     """``force`` with each axis clamped to ±:data:`~bridge.dbc.MAX_FORCE`, and whether it had
     to be (the bridge counts clamps). Non-finite values are the caller's to reject."""
-    fx = min(max(force[0], -MAX_FORCE), MAX_FORCE)
-    fy = min(max(force[1], -MAX_FORCE), MAX_FORCE)
-    return (fx, fy), (fx, fy) != (force[0], force[1])
+    return _clamp(force, MAX_FORCE)
+
+
+def clamp_command_velocity(velocity: Vec2) -> tuple[Vec2, bool]:
+    """``velocity`` with each axis clamped to ±:data:`~bridge.dbc.MAX_COMMAND_SPEED` (a
+    ``MotionCommand``'s range), and whether it had to be."""
+    return _clamp(velocity, MAX_COMMAND_SPEED)
 
 
 def checksum(frame_id: int, data: bytes) -> int:

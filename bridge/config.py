@@ -13,6 +13,22 @@ ignores ``[can]``; the bridge reads the rest as the agent does
     watchdog_ms = 100          # no valid command for this long: zero force
     time_source = "sync"       # ticks from the bus's Sync frames ("clock": this host's clock)
     realtime_priority = 0      # 1..99: run under SCHED_FIFO at this priority (0: do not)
+    profile = "force"          # the AGV's protocol: "force" (agv.dbc) or "velocity"
+
+    [can.admittance]           # the velocity profile's admittance loop (bridge/admittance.py)
+    mass = 10.0                # kg, the virtual mass M
+    damping = 0.0              # N s/m, the virtual damper D
+    integral_time_s = 0.05     # s, the base's speed-loop time constant (0: no integral)
+    deadzone_n = 0.1           # N
+    max_speed = 1.5            # m/s
+    max_accel = 2.0            # m/s²
+    tare_samples = 20          # F/T samples averaged into the sensor's bias at start-up
+
+With ``profile = "force"`` the driver takes force commands (``ForceCommand``) and reports the
+force it applied; with ``"velocity"`` the base takes velocity commands (``MotionCommand``), a
+force/torque sensor at the contact reports the force, and the bridge closes the admittance
+loop between them (:mod:`bridge.bridge`). ``[can.admittance]`` is read with either profile and
+used with the velocity one only.
 
 The bridge is a Zenoh client of the ``[zenoh]`` table's ``connect`` endpoints (the robot's
 router) and never listens itself: on a robot the agent's own listen endpoints stay the agent's.
@@ -32,9 +48,11 @@ from agent.platform.config import (
     from_table,
     read_toml,
     toml_fields,
+    toml_tables,
 )
 from agent.platform.zenoh_session import ZenohSettings
-from bridge.dbc import MAX_NODE
+from bridge.admittance import AdmittanceSettings
+from bridge.dbc import MAX_NODE, PROFILES
 
 TIME_SOURCES = ("sync", "clock")
 """How the bridge gives each sample its tick (see :mod:`bridge.timing`)."""
@@ -65,6 +83,12 @@ class CanSettings:
     this priority, so that its watchdog and its frames keep their timing on a loaded
     computer; it needs the right (root, ``CAP_SYS_NICE``, or systemd's
     ``CPUSchedulingPolicy=fifo`` instead). 0 (the default): the normal scheduler."""
+    profile: str = "force"
+    """The AGV protocol's profile (:data:`bridge.dbc.PROFILES`): ``force``, a driver that
+    takes force commands; ``velocity``, a base that takes velocity commands with a
+    force/torque sensor at its contact."""
+    admittance: AdmittanceSettings = AdmittanceSettings()
+    """``[can.admittance]``: the velocity profile's admittance loop."""
 
     def validate(self, where: str) -> None:
         if not self.interface.isidentifier():
@@ -79,6 +103,10 @@ class CanSettings:
         if self.time_source not in TIME_SOURCES:
             raise ConfigError(
                 f"{where}.time_source: expected sync or clock, got {self.time_source!r}"
+            )
+        if self.profile not in PROFILES:
+            raise ConfigError(
+                f"{where}.profile: expected {' or '.join(PROFILES)}, got {self.profile!r}"
             )
         check_bounds(self, where)
 
@@ -103,9 +131,9 @@ class BridgeConfig:
 
 
 def can_table(can: CanSettings) -> str:
-    """``can`` as ``robot.toml``'s ``[can]`` table, every key written (what
-    :func:`load_bridge_config` reads back as ``can``)."""
-    return "\n".join(["", "[can]", *toml_fields(can)]) + "\n"
+    """``can`` as ``robot.toml``'s ``[can]`` table and its ``[can.admittance]``, every key
+    written (what :func:`load_bridge_config` reads back as ``can``)."""
+    return "\n".join(["", "[can]", *toml_fields(can), *toml_tables(can, "can.")]) + "\n"
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:

@@ -12,11 +12,12 @@ The I/O around a :class:`~bridge.bridge.Bridge`:
   in, its measurements out, exactly as the plant's, so an agent cannot tell a bridged robot from a
   simulated one. The bridge declares its own liveliness token (``Keys.bridge_alive``) once the
   bus is open, and publishes its :class:`~agent.platform.protocol.BridgeStatus` every
-  :data:`STATUS_EVERY_S` and whenever its watchdog trips or clears.
+  :data:`STATUS_EVERY_S` and whenever its watchdog (or, with the velocity profile, its stale
+  sensor stop) trips or clears.
 
-It runs until SIGINT, SIGTERM or SIGHUP, and then commands zero force before it leaves. The
-team's ``stop`` message ends a run, not the robot's link: the bridge commands zero force and
-keeps running.
+It runs until SIGINT, SIGTERM or SIGHUP, and then commands zero force (standstill with the
+velocity profile) before it leaves. The team's ``stop`` message ends a run, not the robot's
+link: the bridge commands zero force (standstill) and keeps running.
 """
 
 from __future__ import annotations
@@ -36,8 +37,9 @@ from agent.platform.protocol import Command, Control, Keys
 from agent.platform.robot_io import Event, Liveliness
 from agent.platform.zenoh_robot_io import ZenohAgentsPort
 from agent.platform.zenoh_session import open_session
+from bridge.admittance import Admittance
 from bridge.bridge import Bridge
-from bridge.codec import COUNTER_MODULO, AgvCodec, ForceCommand
+from bridge.codec import AgvCodec
 from bridge.config import BridgeConfig, CanSettings
 from bridge.timing import ClockTicks, SyncTicks
 
@@ -130,7 +132,10 @@ class BridgeNode:
             ticks=ticks,
             rejects=port.rejects,
             wall=time.time,
-            codec=AgvCodec(),
+            codec=AgvCodec(config.can.profile),
+            admittance=Admittance(config.can.admittance, robot.period_s)
+            if config.can.profile == "velocity"
+            else None,
         )
         self.bus: can.BusABC | None = None
         self._reader: threading.Thread | None = None
@@ -239,16 +244,31 @@ class BridgeNode:
             self.open()
         source = "the bus's Sync frames" if config.can.time_source == "sync" else "this clock"
         log.info(
-            "bridge of robot %d up: node %d on %s/%s, watchdog %d ms, ticks from %s",
+            "bridge of robot %d up: node %d on %s/%s, %s profile, watchdog %d ms, ticks from %s",
             bridge.robot,
             bridge.node,
             config.can.interface,
             config.can.channel,
+            config.can.profile,
             config.can.watchdog_ms,
             source,
         )
+        if bridge.admittance is not None:
+            a = bridge.admittance.settings
+            log.info(
+                "robot %d: admittance M %g kg, D %g N s/m, integral %g s, deadzone %g N,"
+                " max speed %g m/s, max accel %g m/s², tare over %d samples",
+                bridge.robot,
+                a.mass,
+                a.damping,
+                a.integral_time_s,
+                a.deadzone_n,
+                a.max_speed,
+                a.max_accel,
+                a.tare_samples,
+            )
         next_status = time.monotonic()
-        tripped = bridge.tripped
+        stops = (bridge.tripped, bridge.sensor_stale)
         try:
             while not self.stop.is_set():
                 now = time.monotonic()
@@ -258,8 +278,9 @@ class BridgeNode:
                 now = time.monotonic()
                 self._send(bridge.watchdog(now))
                 self._try_reopen()
-                if now >= next_status or bridge.tripped != tripped:
-                    tripped = bridge.tripped
+                stopped = (bridge.tripped, bridge.sensor_stale)
+                if now >= next_status or stopped != stops:
+                    stops = stopped
                     self.port.report(bridge.status())
                     next_status = now + STATUS_EVERY_S
         finally:
@@ -267,12 +288,11 @@ class BridgeNode:
         return 0
 
     def _leave(self) -> None:
-        """Zero force, the last status, the counters in the log; the bus closed."""
+        """Zero force (standstill), the last status, the counters in the log; the bus
+        closed."""
         bridge = self.bridge
         if self.bus is not None:
-            latest = bridge.ticks.latest(time.time()) or 0
-            zero = ForceCommand(bridge.node, latest % COUNTER_MODULO, (0.0, 0.0), apply=False)
-            self._send([bridge.codec.encode(zero)])
+            self._send([bridge.halt(bridge.ticks.latest(time.time()) or 0)])
         self.port.report(bridge.status())
         self._close_bus()
         counts = dict(sorted(bridge.counts.items()))

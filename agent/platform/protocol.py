@@ -355,8 +355,15 @@ class BridgeStatus:
     """An AGV bridge's health (see :mod:`bridge.bridge`): frames each way, frames rejected
     by the codec (``decode_errors``), sequence (repeated frames, counter jumps and the frames
     they lost, ticks without a measurement), commands clamped or refused, error frames, bus
-    reopenings, its command watchdog (``watchdog`` true while it commands zero force because
-    the agent fell silent) and the driver's last heartbeat (``driver_mode`` -1: none yet)."""
+    reopenings, its command watchdog (``watchdog`` true while it commands zero force, or
+    standstill, because the agent fell silent) and the driver's last heartbeat
+    (``driver_mode`` -1: none yet).
+
+    ``profile`` is the AGV protocol's (:data:`AGV_PROFILES`). With ``velocity`` the bridge
+    closes an admittance loop: ``force_error_rms`` and ``force_error_p95`` (N) are its
+    force-tracking error ``‖f_cmd − f_meas‖`` over its last 100 steps, and ``sensor_stale``
+    is true while the base stands still because the force/torque sensor fell silent or
+    reports a fault (``sensor_stale_trips`` times so far); all zero with ``force``."""
 
     robot: int
     tick: int
@@ -375,6 +382,11 @@ class BridgeStatus:
     reopens: int = 0
     driver_mode: int = -1
     driver_faults: int = 0
+    profile: str = "force"
+    force_error_rms: float = 0.0
+    force_error_p95: float = 0.0
+    sensor_stale: bool = False
+    sensor_stale_trips: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -387,6 +399,9 @@ class Control:
 CONTROL_COMMANDS = ("stop",)
 CLOCKS = ("lockstep", "realtime")
 """How the plant and the agents keep time (see :mod:`agent.node` and :mod:`simulator.node`)."""
+AGV_PROFILES = ("force", "velocity")
+"""The AGV protocol's profiles a bridge speaks (``bridge.dbc.PROFILES``): a driver that takes
+force commands, or a velocity-commanded base with a force/torque sensor."""
 
 
 # ====================================================================== key expressions
@@ -528,7 +543,7 @@ class Keys:
 # :func:`decode` checks everything it can and raises :class:`DecodeError` — callers count and
 # log those, never crash on them.
 
-WIRE_VERSION = 12
+WIRE_VERSION = 13
 _MAGIC = 0x48
 _HEADER = _struct.Struct("<BBB")
 
@@ -947,6 +962,10 @@ def _bridge_status(m: BridgeStatus) -> None:
         _within(f"bridge_status.{name}", getattr(m, name), 0, MAX_TICK)
     _within("bridge_status.driver_mode", m.driver_mode, -1, 15)
     _within("bridge_status.driver_faults", m.driver_faults, 0, 255)
+    if m.profile not in AGV_PROFILES:
+        raise DecodeError(f"bridge_status.profile {m.profile!r} is not one of {AGV_PROFILES}")
+    _within("bridge_status.force_error_rms", m.force_error_rms, 0.0, MAX_FORCE)
+    _within("bridge_status.force_error_p95", m.force_error_p95, 0.0, MAX_FORCE)
 
 
 _BRIDGE_COUNTERS = (
@@ -962,6 +981,7 @@ _BRIDGE_COUNTERS = (
     "rejected_commands",
     "bus_errors",
     "reopens",
+    "sensor_stale_trips",
 )
 
 

@@ -462,7 +462,7 @@ class Listener:
 Say = Callable[[str], None]
 
 
-def _say(message: str) -> None:
+def say_on_stderr(message: str) -> None:
     print(f"{STDERR_PREFIX}: {message}", file=sys.stderr, flush=True)
 
 
@@ -484,11 +484,12 @@ def _warm_up(driver: Driver, listener: Listener, rig: BridgeRig, settings: CanBe
     driver.play(driver.encode(max(10, round(0.5 * rate))), rate)
 
 
-def _cpu_now(rig: BridgeRig) -> dict[str, float | None]:
+def cpu_now(rig: BridgeRig) -> dict[str, float | None]:
+    """CPU seconds used so far by each process of the rig, and by this one (``driver``)."""
     return {**rig.cpu_seconds(), "driver": cpu_seconds(os.getpid())}
 
 
-def _cpu_percent(before: dict, after: dict, seconds: float) -> dict[str, float | None]:
+def cpu_percent(before: dict, after: dict, seconds: float) -> dict[str, float | None]:
     """Each process's CPU time between ``before`` and ``after`` as % of ``seconds``."""
     shares: dict[str, float | None] = {}
     for name, start in before.items():
@@ -506,10 +507,10 @@ def measure_round_trips(
     ticks = driver.encode(count)
     window = range(driver.tick - count, driver.tick)
     listener.forget()
-    cpu_before = _cpu_now(rig)
+    cpu_before = cpu_now(rig)
     start, _ = driver.play(ticks, 1.0 / settings.period_s)
     seconds = time.monotonic() - start
-    cpu_after = _cpu_now(rig)
+    cpu_after = cpu_now(rig)
     listener.wait_answers(window, max(1.0, 50 * settings.period_s), COMMAND_WAIT_S)
     latencies, lost, unmatched = listener.latencies_ms(window)
     return RoundTrips(
@@ -518,7 +519,7 @@ def measure_round_trips(
         lost=lost,
         unmatched=unmatched,
         seconds=seconds,
-        cpu_percent=_cpu_percent(cpu_before, cpu_after, seconds),
+        cpu_percent=cpu_percent(cpu_before, cpu_after, seconds),
     )
 
 
@@ -537,12 +538,12 @@ def measure_rate(
     listener.forget()
     before = rig.settled_status(frames_in=1 << 62)
     sent, failures = driver.sent, driver.failures
-    cpu_before = _cpu_now(rig)
+    cpu_before = cpu_now(rig)
     start, last = driver.play(ticks, rate)
     frames, failed = driver.sent - sent, driver.failures - failures
     listener.wait_answers(window, COMMAND_QUIET_S, COMMAND_WAIT_S)
     busy = time.monotonic() - start
-    cpu = _cpu_percent(cpu_before, _cpu_now(rig), busy)["bridge"]
+    cpu = cpu_percent(cpu_before, cpu_now(rig), busy)["bridge"]
     after = rig.settled_status(frames_in=before.frames_in + frames)
     latencies, lost, _ = listener.latencies_ms(window)
     return RateStep(
@@ -564,7 +565,7 @@ def search_rate(
     listener: Listener,
     rig: BridgeRig,
     settings: CanBenchSettings,
-    say: Say = _say,
+    say: Say = say_on_stderr,
 ) -> tuple[list[RateStep], bool]:
     """The rate search's steps, and whether it stopped because this process could not send
     faster while the bridge kept up."""
@@ -588,7 +589,7 @@ def search_rate(
     return steps, limited
 
 
-def run_can_benchmark(settings: CanBenchSettings, say: Say = _say) -> CanBenchReport:
+def run_can_benchmark(settings: CanBenchSettings, say: Say = say_on_stderr) -> CanBenchReport:
     """Bring up the rig on ``settings.channel``, measure (see the module docstring), stop
     it. :class:`BenchError` if it cannot measure."""
     where = where_measured()

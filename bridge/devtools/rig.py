@@ -23,6 +23,7 @@ from agent.platform.children import Child, cpu_seconds, free_port
 from agent.platform.config import to_toml
 from agent.platform.protocol import BridgeStatus, DecodeError, Keys, decode
 from agent.platform.zenoh_session import ZenohSettings, open_session
+from bridge.admittance import AdmittanceSettings
 from bridge.config import CanSettings, can_table
 from bridge.devtools.echo_agent import READY
 from bridge.node import STATUS_EVERY_S
@@ -79,9 +80,12 @@ def bridge_toml(
     watchdog_ms: int,
     robot: int = 1,
     realtime_priority: int = 0,
+    profile: str = "force",
+    admittance: AdmittanceSettings | None = None,
 ) -> str:
     """Robot ``robot``'s ``robot.toml`` (a client of ``router``) with its ``[can]`` table:
-    node id = robot id, ticks from the bus's ``Sync`` frames."""
+    node id = robot id, ticks from the bus's ``Sync`` frames, the AGV protocol's ``profile``
+    (and with ``velocity`` the admittance loop's settings)."""
     config = AgentNodeConfig(
         robot=robot,
         n=2,
@@ -98,6 +102,8 @@ def bridge_toml(
         watchdog_ms=int(watchdog_ms),
         time_source="sync",
         realtime_priority=int(realtime_priority),
+        profile=profile,
+        admittance=admittance or AdmittanceSettings(),
     )
     return to_toml(config, f"Robot {robot}'s bridge, for a benchmark.") + can_table(can)
 
@@ -105,7 +111,9 @@ def bridge_toml(
 class BridgeRig:
     """A router, robot 1's ``heft bridge`` on ``channel`` and the echo agent (see the module
     docstring); files and logs in ``folder``. :meth:`start` brings them up, :meth:`close`
-    stops them."""
+    stops them. With ``profile = "velocity"`` the bridge runs the admittance loop of
+    ``admittance`` and the agent pushes with ``push_n`` newtons
+    (:func:`~bridge.devtools.echo_agent.push`)."""
 
     ROBOT = 1
 
@@ -117,6 +125,9 @@ class BridgeRig:
         team: str = "bench",
         watchdog_ms: int = 100,
         realtime_priority: int = 0,
+        profile: str = "force",
+        admittance: AdmittanceSettings | None = None,
+        push_n: float | None = None,
     ) -> None:
         self.channel = channel
         self.folder = folder
@@ -124,6 +135,9 @@ class BridgeRig:
         self.team = team
         self.watchdog_ms = watchdog_ms
         self.realtime_priority = realtime_priority
+        self.profile = profile
+        self.admittance = admittance
+        self.push_n = push_n
         self.router = f"tcp/127.0.0.1:{free_port()}"
         self.children: dict[str, Child] = {}
         self.session = None
@@ -152,6 +166,8 @@ class BridgeRig:
             self.period_s,
             self.watchdog_ms,
             realtime_priority=self.realtime_priority,
+            profile=self.profile,
+            admittance=self.admittance,
         )
         config.write_text(text, encoding="utf-8")
         self._start("bridge", ["-m", "agent", "bridge", "--config", str(config)])
@@ -165,10 +181,10 @@ class BridgeRig:
 
     def start_agent(self, timeout_s: float = 120.0) -> None:
         """Start the echo agent (again) and wait until it answers."""
-        agent = self._start(
-            "echo agent",
-            ["-m", "bridge.devtools.echo_agent", "--connect", self.router, "--team", self.team],
-        )
+        args = ["-m", "bridge.devtools.echo_agent", "--connect", self.router, "--team", self.team]
+        if self.push_n is not None:
+            args += ["--push", repr(self.push_n)]
+        agent = self._start("echo agent", args)
         if not agent.wait_for_line(READY, timeout_s):
             self.check()
             raise RigError(f"the echo agent did not come up in time:\n{agent.tail()}")

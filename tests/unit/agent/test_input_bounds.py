@@ -25,6 +25,7 @@ from agent.node import AgentNodeConfig, load_agent_config
 from agent.platform.config import MAX_ROBOTS, MAX_SEED, Bound, bounds
 from agent.platform.heft import main
 from agent.platform.zenoh_session import ZenohSettings
+from bridge.admittance import AdmittanceSettings
 from bridge.config import CanSettings
 from simulator.polygon import polygon_diameter
 from simulator.scenario import (
@@ -439,6 +440,7 @@ def _documented_limits() -> str:
         ("robot.toml", AgentNodeConfig),
         ("zenoh", ZenohSettings),
         ("can", CanSettings),
+        ("can.admittance", AdmittanceSettings),
     ],
 )
 def test_the_docs_list_every_range(table, cls) -> None:

@@ -35,6 +35,7 @@ from agent.platform.faults import FaultSettings
 from agent.platform.heft import main
 from agent.platform.protocol import CLOCKS
 from agent.platform.zenoh_session import DEFAULT_ROUTER, ZenohSettings, zenoh_config
+from bridge.admittance import AdmittanceSettings
 from bridge.config import CanSettings, can_table
 from simulator.can_drivers import CanLink
 from simulator.launcher import can_settings, robot_toml
@@ -325,6 +326,10 @@ def test_the_launchers_can_table_reads_back_whatever_the_names() -> None:
     assert settings.channel == 'can\\"3' and settings.node == 3 and settings.watchdog_ms == 50
     table = tomllib.loads(can_table(settings))["can"]
     assert from_table(CanSettings, table, "can") == settings
+    loop = AdmittanceSettings(mass=2.5, damping=7.25, tare_samples=3)
+    velocity = dataclasses.replace(settings, profile="velocity", admittance=loop)
+    table = tomllib.loads(can_table(velocity))["can"]
+    assert from_table(CanSettings, table, "can") == velocity
 
 
 def test_launcher_robot_toml_carries_faults_and_tuning(paper) -> None:

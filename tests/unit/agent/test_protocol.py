@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.platform.protocol import (
+    AGV_PROFILES,
     DOMAINS,
     KINDS,
     WIRE_VERSION,
@@ -190,6 +191,15 @@ TRUTH = Truth(
 CONTROL = Control("stop")
 PLANT_STATUS = PlantStatus(tick=6000, time_s=60.0, clock="realtime", lost=(2,), latency_ms_p50=0.4)
 BRIDGE_STATUS = BridgeStatus(robot=2, tick=77, watchdog=True, watchdog_trips=1, frames_in=154)
+BRIDGE_STATUS_VELOCITY = BridgeStatus(
+    robot=3,
+    tick=78,
+    profile="velocity",
+    force_error_rms=0.125,
+    force_error_p95=0.5,
+    sensor_stale=True,
+    sensor_stale_trips=2,
+)
 GEOMETRY = LoadGeometry(
     n=3,
     outline=((-1.5, -0.5), (1.5, -0.5), (0.25, 1.0)),
@@ -216,6 +226,7 @@ MESSAGES = {
     "plant-status": PLANT_STATUS,
     "load-geometry": GEOMETRY,
     "bridge-status": BRIDGE_STATUS,
+    "bridge-status-velocity": BRIDGE_STATUS_VELOCITY,
 }
 
 
@@ -456,6 +467,18 @@ def test_json_messages_are_checked_too() -> None:
     assert "clock" in str(rejects(PlantStatus, encode(_with(PLANT_STATUS, clock="sundial"))))
     assert "positive" in str(rejects(Truth, encode(_with(TRUTH, mass=-5.0))))
     assert "largest_speed" in str(rejects(Truth, encode(_with(TRUTH, largest_speed=-0.1))))
+    velocity = BRIDGE_STATUS_VELOCITY
+    assert "profile" in str(rejects(BridgeStatus, encode(_with(velocity, profile="torque"))))
+    error = rejects(BridgeStatus, encode(_with(velocity, force_error_p95=-0.1)))
+    assert "force_error_p95" in str(error)
+    error = rejects(BridgeStatus, encode(_with(velocity, sensor_stale_trips=-1)))
+    assert "sensor_stale_trips" in str(error)
+
+
+def test_the_bridges_profiles_are_the_dbcs() -> None:
+    from bridge.dbc import PROFILES
+
+    assert AGV_PROFILES == PROFILES
 
 
 NOT_GROUNDS = {

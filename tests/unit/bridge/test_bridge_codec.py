@@ -17,12 +17,15 @@ from bridge.codec import (
     AgvCodec,
     AppliedForce,
     ForceCommand,
+    ForceTorque,
     FrameError,
     Heartbeat,
     MotionCommand,
+    MotionFeedback,
     Odometry,
     Sync,
     checksum,
+    clamp_command_velocity,
     clamp_force,
 )
 from bridge.dbc import (
@@ -32,9 +35,13 @@ from bridge.dbc import (
     FAULT_BITS,
     FORCE_COMMAND_BASE,
     FORCE_RESOLUTION,
+    FORCE_TORQUE_BASE,
     HEARTBEAT_BASE,
+    MAX_COMMAND_SPEED,
     MAX_FORCE,
     MAX_SPEED,
+    MOTION_COMMAND_BASE,
+    MOTION_FEEDBACK_BASE,
     ODOMETRY_BASE,
     SPEED_RESOLUTION,
     SYNC_ID,
@@ -357,3 +364,100 @@ def test_clamp_force_clamps_to_the_range_and_reports_it() -> None:
 def test_encode_refuses_non_finite_values(frame) -> None:
     with pytest.raises(ValueError, match="not a finite number"):
         CODEC.encode(frame)
+
+
+# ------------------------------------------------------------------------------ velocity profile
+VELOCITY = AgvCodec("velocity")
+
+
+def velocity_round_trip(frame):
+    msg = VELOCITY.encode(frame)
+    assert msg.dlc == 8 and not msg.is_extended_id
+    return msg, VELOCITY.decode(msg)
+
+
+@pytest.mark.parametrize("node", NODES)
+def test_every_velocity_frame_round_trips_for_every_counter(node: int) -> None:
+    velocity = (1.234567, -0.000042)
+    force = (123.4567, -0.0042)
+    for counter in COUNTERS:
+        msg, back = velocity_round_trip(MotionCommand(node, counter, velocity))
+        assert msg.arbitration_id == MOTION_COMMAND_BASE + node
+        assert type(back) is MotionCommand and (back.node, back.counter) == (node, counter)
+        assert back.drive is True
+        assert back.velocity == pytest.approx(velocity, abs=HALF_SPEED)
+
+        msg, back = velocity_round_trip(MotionFeedback(node, counter, velocity))
+        assert msg.arbitration_id == MOTION_FEEDBACK_BASE + node
+        assert type(back) is MotionFeedback and (back.node, back.counter) == (node, counter)
+        assert back.velocity == pytest.approx(velocity, abs=HALF_SPEED)
+
+        status = counter % 4  # none, OVERRANGE, FAULT, both
+        msg, back = velocity_round_trip(ForceTorque(node, counter, force, status))
+        assert msg.arbitration_id == FORCE_TORQUE_BASE + node
+        assert type(back) is ForceTorque and (back.node, back.counter) == (node, counter)
+        assert back.status == status
+        assert back.force == pytest.approx(force, abs=HALF_FORCE)
+
+
+@pytest.mark.parametrize("node", NODES)
+@pytest.mark.parametrize("counter", (0, 7, 15))
+def test_a_stop_decodes_to_standstill(node: int, counter: int) -> None:
+    msg, back = velocity_round_trip(MotionCommand(node, counter, (3.0, -2.0), drive=False))
+    assert back == MotionCommand(node, counter, (0.0, 0.0), drive=False)
+    assert msg.data[6] & 0x0F == 0  # Mode STOP
+    assert msg.data[:6] == bytes(6)  # and no velocity on the wire either
+
+
+@pytest.mark.parametrize("node", NODES)
+@pytest.mark.parametrize("sign", (1.0, -1.0))
+def test_the_extremes_of_each_velocity_range_round_trip(node: int, sign: float) -> None:
+    command, speed, force = sign * MAX_COMMAND_SPEED, sign * MAX_SPEED, sign * MAX_FORCE
+    _, back = velocity_round_trip(MotionCommand(node, 15, (command, -command)))
+    assert back.velocity == pytest.approx((command, -command), abs=HALF_SPEED)
+    _, back = velocity_round_trip(MotionFeedback(node, 15, (speed, -speed)))
+    assert back.velocity == pytest.approx((speed, -speed), abs=HALF_SPEED)
+    _, back = velocity_round_trip(ForceTorque(node, 15, (force, -force), 0b11))
+    assert back.force == pytest.approx((force, -force), abs=HALF_FORCE)
+    inside = command - sign * SPEED_RESOLUTION
+    _, back = velocity_round_trip(MotionCommand(node, 0, (inside, 0.0)))
+    assert back.velocity[0] == pytest.approx(inside, abs=HALF_SPEED) and back.velocity[0] != command
+    with pytest.raises(ValueError):
+        VELOCITY.encode(MotionCommand(node, 0, (command * 1.01, 0.0)))
+
+
+@pytest.mark.parametrize(
+    "profile, frame",
+    [
+        ("force", MotionCommand(1, 3, (0.5, -0.5))),
+        ("force", MotionFeedback(2, 4, (0.5, -0.5))),
+        ("force", ForceTorque(3, 5, (1.0, 2.0))),
+        ("velocity", Odometry(1, 3, (0.5, -0.5))),
+        ("velocity", ForceCommand(2, 4, (1.0, 2.0))),
+        ("velocity", AppliedForce(3, 5, (1.0, 2.0))),
+    ],
+    ids=lambda v: v if isinstance(v, str) else type(v).__name__,
+)
+def test_the_other_profiles_frames_are_refused_as_wrong_profile(profile: str, frame) -> None:
+    own, other = AgvCodec(profile), AgvCodec("velocity" if profile == "force" else "force")
+    msg = other.encode(frame)
+    assert other.decode(msg) == frame  # a valid frame, of the other profile
+    with pytest.raises(FrameError) as caught:
+        own.decode(msg)
+    assert caught.value.reason == "wrong profile"
+
+
+@pytest.mark.parametrize("profile", ["force", "velocity"])
+def test_both_profiles_share_sync_and_heartbeat(profile: str) -> None:
+    codec = AgvCodec(profile)
+    for frame in (Sync(1234), Heartbeat(5, 3, 2, 1)):
+        assert codec.decode(codec.encode(frame)) == frame
+
+
+def test_clamp_command_velocity_clamps_to_the_dbc_and_reports_it() -> None:
+    assert clamp_command_velocity((1.0, -2.0)) == ((1.0, -2.0), False)
+    top = MAX_COMMAND_SPEED
+    assert clamp_command_velocity((9.0, -2.0)) == ((top, -2.0), True)
+    assert clamp_command_velocity((-1e9, 1e9)) == ((-top, top), True)
+    velocity, clamped = clamp_command_velocity((20.0, -20.0))
+    assert clamped and VELOCITY.quantize_command_velocity(velocity) == (top, -top)
