@@ -66,9 +66,10 @@ from bridge.codec import (
     MotionFeedback,
     Odometry,
     Sync,
+    clamp_command_velocity,
     clamp_force,
 )
-from bridge.dbc import DRIVER_MODES, HEARTBEAT_PERIOD_MS, MAX_COMMAND_SPEED, MAX_NODE, MAX_SPEED
+from bridge.dbc import DRIVER_MODES, HEARTBEAT_PERIOD_MS, MAX_NODE, MAX_SPEED
 from simulator.lockstep import VelocityCommand
 
 log = logging.getLogger("heft.sim.can")
@@ -163,14 +164,6 @@ def clamp_velocity(velocity: Vec2) -> tuple[Vec2, bool]:
     return (vx, vy), (vx, vy) != (velocity[0], velocity[1])
 
 
-def clamp_command_velocity(velocity: Vec2) -> tuple[Vec2, bool]:
-    """``velocity`` with each axis clamped to a velocity command's range (±8 m/s), and whether
-    it had to be."""
-    vx = min(max(velocity[0], -MAX_COMMAND_SPEED), MAX_COMMAND_SPEED)
-    vy = min(max(velocity[1], -MAX_COMMAND_SPEED), MAX_COMMAND_SPEED)
-    return (vx, vy), (vx, vy) != (velocity[0], velocity[1])
-
-
 class CanQuantiser:
     """What crossing the CAN link does to the values, without a bus: the same clamps and the
     codec's own quantisation (:meth:`AgvCodec.quantize_velocity`,
@@ -198,6 +191,13 @@ class CanQuantiser:
         """A commanded force as the driver gets it from the bridge's ``ForceCommand``."""
         clamped, _ = clamp_force(force)
         return self.codec.quantize_force(clamped)
+
+    def loop_force(self, force: Vec2) -> Vec2:
+        """An agent's force as its AGV bridge gives it to the admittance loop (velocity
+        profile): clamped to the protocol's ±500 N per axis, as the force profile's commands
+        are (it crosses no bus: the agent's messages are not quantised)."""
+        clamped, _ = clamp_force(force)
+        return clamped
 
     def velocity(self, velocity: Vec2) -> Vec2:
         """A commanded velocity as the base's driver gets it from the bridge's

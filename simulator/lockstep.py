@@ -85,6 +85,11 @@ class Link(Protocol):
         """A commanded force as the robot's drive gets it."""
         ...
 
+    def loop_force(self, force: Vec2) -> Vec2:
+        """An agent's force as the admittance loop on its AGV bridge takes it (velocity
+        profile)."""
+        ...
+
     def velocity(self, velocity: Vec2) -> Vec2:
         """A commanded velocity as the robot's base gets it (velocity profile)."""
         ...
@@ -130,9 +135,9 @@ class ForceDrive:
 class AdmittanceDrive:
     """A velocity-commanded base with its admittance loop (:mod:`bridge.admittance`), as its
     AGV bridge runs it: the sensor's raw force, as the link carries it, is tared into the force
-    the agent gets (:meth:`~bridge.admittance.Admittance.measure`), and the agent's force
-    becomes the base's velocity (:meth:`~bridge.admittance.Admittance.step`), as the link
-    carries it."""
+    the agent gets (:meth:`~bridge.admittance.Admittance.measure`), and the agent's force (as
+    the bridge takes it) becomes the base's velocity
+    (:meth:`~bridge.admittance.Admittance.step`), as the link carries it."""
 
     def __init__(self, plant: Plant, robot: int, admittance: Admittance, link: Link | None):
         self.plant, self.robot, self.link = plant, robot, link
@@ -144,10 +149,12 @@ class AdmittanceDrive:
         return dataclasses.replace(m, force=self.admittance.measure(m.force))
 
     def command(self, value: Vec2) -> None:
-        velocity = self.admittance.step(value)
-        if self.link is not None:
-            velocity = self.link.velocity(velocity)
-        self.plant.command_velocity(self.robot, velocity)
+        link = self.link
+        if link is None:
+            self.plant.command_velocity(self.robot, self.admittance.step(value))
+            return
+        velocity = self.admittance.step(link.loop_force(value))
+        self.plant.command_velocity(self.robot, link.velocity(velocity))
 
 
 class BaseDrive:

@@ -33,6 +33,7 @@ from bridge.codec import (
     MotionFeedback,
     Odometry,
     Sync,
+    clamp_command_velocity,
     clamp_force,
 )
 from bridge.dbc import MAX_SPEED
@@ -43,7 +44,6 @@ from simulator.can_drivers import (
     CanDriversPort,
     CanLink,
     CanQuantiser,
-    clamp_command_velocity,
 )
 from simulator.inprocess import run_inprocess
 from simulator.lockstep import RunEnd, VelocityCommand
@@ -449,7 +449,8 @@ class StandInBridges:
                     force, _ = clamp_force(item.force)
                     self.buses.command(item.robot, item.tick % 16, force)
                     continue
-                velocity, _ = clamp_command_velocity(self.loops[item.robot].step(item.force))
+                force, _ = clamp_force(item.force)
+                velocity, _ = clamp_command_velocity(self.loops[item.robot].step(force))
                 frame = MotionCommand(item.robot, item.tick % 16, velocity)
                 self.buses.peer[item.robot].send(self.codec.encode(frame))
 

@@ -12,7 +12,7 @@ from types import SimpleNamespace
 from agent.platform.evaluation import final_instant
 from agent.platform.protocol import Phase
 from bridge.admittance import Admittance
-from bridge.codec import AgvCodec
+from bridge.codec import AgvCodec, clamp_force
 from simulator.can_drivers import CanQuantiser
 from simulator.inprocess import run_inprocess
 from simulator.lockstep import PlantTicks, RunEnd, Verdict
@@ -97,11 +97,12 @@ def test_a_velocity_bases_tick_crosses_the_link_through_its_admittance_loop() ->
             assert m.force == loop.measure(codec.quantize_force(r.force))
             quantised += m.velocity != r.velocity
         forces = [(2.0 * math.cos(k / 7 + i), 1.0) for i in range(scenario.n)]
+        forces[0] = (600.0, -0.5) if k == 45 else forces[0]  # beyond the protocol's ±500 N
         ticks.apply(forces, truth=False)
         bases = ticks.plant.bases
         assert bases is not None
         for robot, (loop, force) in enumerate(zip(loops, forces), start=1):
-            velocity = codec.quantize_command_velocity(loop.step(force))
+            velocity = codec.quantize_command_velocity(loop.step(clamp_force(force)[0]))
             assert bases.commanded[robot - 1] == velocity
             twin.command_velocity(robot, velocity)
             moving += velocity != (0.0, 0.0)
