@@ -1,4 +1,5 @@
-"""The robots' drivers on CAN: the plant's side of the AGV protocol (``bridge/agv.dbc``).
+"""The robots' drivers on CAN: the plant's side of the AGV protocol (``bridge/agv.dbc``, and
+``bridge/agv-velocity.dbc`` for velocity-commanded bases).
 
 In a CAN run (``heft sim SCENARIO --can``) the plant plays every AGV's driver. Each robot is
 on a CAN bus (by default its own: robot ``i`` on ``vcan{i}``), where its AGV bridge
@@ -8,15 +9,20 @@ back. :class:`CanDriversPort` is the :class:`~agent.platform.robot_io.AgentsPort
 - :meth:`~CanDriversPort.send` of tick ``k``'s measurement puts ``Sync(k)`` on the robot's bus
   (once per tick per bus: it opens the tick; again with a re-sent tick), then the robot's
   ``Odometry`` (its velocity) and ``AppliedForce`` (its measured force) with
-  ``Counter = k % 16``. Values outside the DBC's
-  ranges are clamped to them, and counted;
+  ``Counter = k % 16``; with the velocity profile (the codec's, from ``[agvs] profile``) its
+  ``MotionFeedback`` (its base's velocity) and ``ForceTorque`` (its sensor's raw force)
+  instead. Values outside the DBC's ranges are clamped to them, and counted;
 - every driver sends a ``Heartbeat`` every 100 ms (mode READY, then ACTIVE once the ticks run);
 - a ``ForceCommand`` frame becomes a :class:`~agent.platform.protocol.Command` for the newest tick
   ``≤`` the last tick opened on that bus whose ``% 16`` is the frame's counter. A ZERO-mode
   frame is the bridge's watchdog (its agent fell silent): on the wall clock it is a zero
   command for the bus's latest tick; in lockstep it never counts as a tick's command (the
-  run stays deterministic: the plant waits for the agent's own), it is only counted;
-- a frame that does not decode, or is not one the drivers take, is counted in the port's
+  run stays deterministic: the plant waits for the agent's own), it is only counted. With the
+  velocity profile a ``MotionCommand`` frame is the tick's
+  :class:`~simulator.lockstep.VelocityCommand` the same way, and its STOP mode the watchdog's
+  (a zero velocity: the base brakes);
+- a frame that does not decode (the other profile's among them), or is not one the drivers
+  take, is counted in the port's
   :class:`~agent.platform.process.RejectLog`; the drivers' own frames coming back (buses that echo
   them) are ignored.
 
@@ -53,13 +59,18 @@ from bridge.codec import (
     AgvCodec,
     AppliedForce,
     ForceCommand,
+    ForceTorque,
     FrameError,
     Heartbeat,
+    MotionCommand,
+    MotionFeedback,
     Odometry,
     Sync,
+    clamp_command_velocity,
     clamp_force,
 )
 from bridge.dbc import DRIVER_MODES, HEARTBEAT_PERIOD_MS, MAX_NODE, MAX_SPEED
+from simulator.lockstep import VelocityCommand
 
 log = logging.getLogger("heft.sim.can")
 
@@ -73,6 +84,8 @@ READ_WAIT_S = 0.5
 """The longest a bus reader waits for a frame before it looks at whether the port closes."""
 PARTIES = ("agent", "bridge")
 """Whose liveliness makes a robot up in a CAN run."""
+FEEDBACK = {"force": (Odometry, AppliedForce), "velocity": (MotionFeedback, ForceTorque)}
+"""Profile → the frames of a robot's sample: its velocity's, its measured force's."""
 
 
 # ====================================================================== where the buses are
@@ -154,7 +167,9 @@ def clamp_velocity(velocity: Vec2) -> tuple[Vec2, bool]:
 class CanQuantiser:
     """What crossing the CAN link does to the values, without a bus: the same clamps and the
     codec's own quantisation (:meth:`AgvCodec.quantize_velocity`,
-    :meth:`~AgvCodec.quantize_force`), so that a run in one process equals one over CAN."""
+    :meth:`~AgvCodec.quantize_force`, and for the velocity profile's commands
+    :meth:`~AgvCodec.quantize_command_velocity`), so that a run in one process equals one over
+    CAN; ``codec``'s profile is the robots'."""
 
     def __init__(self, period_s: float, codec: AgvCodec | None = None):
         self.period_s = period_s
@@ -176,6 +191,19 @@ class CanQuantiser:
         """A commanded force as the driver gets it from the bridge's ``ForceCommand``."""
         clamped, _ = clamp_force(force)
         return self.codec.quantize_force(clamped)
+
+    def loop_force(self, force: Vec2) -> Vec2:
+        """An agent's force as its AGV bridge gives it to the admittance loop (velocity
+        profile): clamped to the protocol's ±500 N per axis, as the force profile's commands
+        are (it crosses no bus: the agent's messages are not quantised)."""
+        clamped, _ = clamp_force(force)
+        return clamped
+
+    def velocity(self, velocity: Vec2) -> Vec2:
+        """A commanded velocity as the base's driver gets it from the bridge's
+        ``MotionCommand`` (velocity profile)."""
+        clamped, _ = clamp_command_velocity(velocity)
+        return self.codec.quantize_command_velocity(clamped)
 
 
 # ====================================================================== the port
@@ -216,8 +244,8 @@ class CanDriversPort(AgentsPort):
 
     The port starts a reader thread per bus and the heartbeat thread; :meth:`close` stops
     them and closes ``rest``, not the buses (the caller opened them). ``counts`` tells what
-    happened on the buses: frames out and in, clamps, the watchdog's ZERO frames, echoes,
-    failed sends."""
+    happened on the buses: frames out and in, clamps, the watchdog's ZERO (STOP) frames, echoes,
+    failed sends. The robots' profile is ``codec``'s."""
 
     def __init__(
         self,
@@ -238,6 +266,7 @@ class CanDriversPort(AgentsPort):
         self._rest = rest
         self.clock = clock
         self.codec = codec or AgvCodec()
+        self._feedback = FEEDBACK[self.codec.profile]
         self.parties = frozenset(parties)
         self.counts: Counter[str] = Counter()
         self._counts_lock = threading.Lock()
@@ -274,7 +303,8 @@ class CanDriversPort(AgentsPort):
     # ------------------------------------------------------------------ out
     def send(self, measurement: Measurement) -> None:
         """Tick ``measurement.tick`` of its robot: ``Sync`` (if the tick is new on the bus),
-        ``Odometry``, ``AppliedForce``."""
+        ``Odometry`` and ``AppliedForce`` (velocity profile: ``MotionFeedback`` and
+        ``ForceTorque``)."""
         robot, tick = measurement.robot, measurement.tick
         lane = self._lane_of[robot]
         self._mode = ACTIVE
@@ -291,7 +321,8 @@ class CanDriversPort(AgentsPort):
         again = tick == lane.synced and robot in lane.sent
         if tick > lane.synced or again:
             frames.append(Sync(tick))
-        frames += [Odometry(robot, counter, velocity), AppliedForce(robot, counter, force)]
+        sampled, measured = self._feedback
+        frames += [sampled(robot, counter, velocity), measured(robot, counter, force)]
         try:
             messages = [self.codec.encode(frame) for frame in frames]
         except ValueError as err:  # non-finite: a plant gone wrong
@@ -370,7 +401,7 @@ class CanDriversPort(AgentsPort):
         except FrameError as err:
             self.rejects("can frame", f"{lane.name}: {err}", err.reason)
             return
-        if isinstance(frame, ForceCommand):
+        if isinstance(frame, (ForceCommand, MotionCommand)):
             self._command(event, lane, frame, out)
         elif isinstance(frame, Sync) or frame.node in lane.robots:
             self._count("echoes")  # our own frame, on a bus that echoes them
@@ -378,25 +409,32 @@ class CanDriversPort(AgentsPort):
             what = f"{lane.name}: {type(frame).__name__} of node {frame.node}"
             self.rejects("can frame", what, "not a robot on this bus")
 
-    def _command(self, event: _Frame, lane: _Lane, frame: ForceCommand, out: list[Event]) -> None:
+    def _command(
+        self, event: _Frame, lane: _Lane, frame: ForceCommand | MotionCommand, out: list[Event]
+    ) -> None:
+        if isinstance(frame, ForceCommand):
+            what, active, value, command = "force command", frame.apply, frame.force, Command
+        else:
+            what, active, value = "motion command", frame.drive, frame.velocity
+            command = VelocityCommand
         robot, at = frame.node, event.at
         if robot not in lane.robots:
-            what = f"{lane.name}: ForceCommand of node {robot}"
-            self.rejects("force command", what, "not a robot on this bus")
+            detail = f"{lane.name}: {type(frame).__name__} of node {robot}"
+            self.rejects(what, detail, "not a robot on this bus")
             return
         latest = event.synced  # when it arrived: the tick it can answer at most
         tick = latest - (latest - frame.counter) % COUNTER_MODULO
         if tick < 0:
-            what = f"{lane.name}: node {robot} counter {frame.counter} at tick {latest}"
-            self.rejects("force command", what, "before the first tick")
+            detail = f"{lane.name}: node {robot} counter {frame.counter} at tick {latest}"
+            self.rejects(what, detail, "before the first tick")
             return
-        if not frame.apply:
-            self._count("zero commands")
+        if not active:
+            self._count("zero commands" if command is Command else "stop commands")
             if self.clock == "lockstep":
                 return  # the watchdog's: never a tick's command, the plant waits for the agent's
-            out.append((at, Command(robot, latest, (0.0, 0.0))))
+            out.append((at, command(robot, latest, (0.0, 0.0))))
             return
-        out.append((at, Command(robot, tick, frame.force)))
+        out.append((at, command(robot, tick, value)))
 
     def _liveliness(self, at: float, item: Liveliness, out: list[Event]) -> None:
         """A robot is up once every one of :attr:`parties` is, gone once one of them is."""

@@ -14,8 +14,10 @@ robot's estimators take can be told apart from the plant's (:attr:`RunOutcome.st
 
 ``link="can"`` is the reference of a run over the AGVs' CAN buses (``heft run --can``): every
 measurement and every command is clamped and quantised as it is when it crosses the bus
-(:class:`~simulator.can_drivers.CanQuantiser`), so that a lockstep run over CAN gives the same
-estimates.
+(:class:`~simulator.can_drivers.CanQuantiser`, of the robots' profile), so that a lockstep run
+over CAN gives the same estimates. Velocity-commanded bases (``[agvs] profile = "velocity"``)
+run their admittance loops here, as their AGV bridges do over CAN
+(:class:`~simulator.lockstep.AdmittanceDrive`).
 """
 
 from __future__ import annotations
@@ -111,9 +113,10 @@ def run_inprocess(
         raise ValueError(f"link must be one of {LINKS}, got {link!r}")
     quantiser = None
     if link == "can":
+        from bridge.codec import AgvCodec
         from simulator.can_drivers import CanQuantiser
 
-        quantiser = CanQuantiser(scenario.period_s)
+        quantiser = CanQuantiser(scenario.period_s, AgvCodec(scenario.agvs.profile))
     plant = PlantTicks(scenario, quantiser)
     end = RunEnd.of(scenario)
     agents = make_agents(scenario)

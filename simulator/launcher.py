@@ -77,7 +77,7 @@ from bridge.config import CanSettings, can_table
 from simulator.history import History
 from simulator.inprocess import RunOutcome, Sample
 from simulator.lockstep import INTERRUPTED, RunEnd, Verdict, halted
-from simulator.scenario import Scenario, scenario_to_toml
+from simulator.scenario import Agvs, Scenario, scenario_to_toml
 
 if TYPE_CHECKING:
     from simulator.can_drivers import CanLink
@@ -173,17 +173,23 @@ def bridge_watchdog_ms(scenario: Scenario, clock: str) -> int:
     return min(10_000, math.ceil(BRIDGE_WATCHDOG_MS / min(1.0, scenario.run.real_time_factor)))
 
 
-def can_settings(robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS) -> CanSettings:
+def can_settings(
+    robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS, agvs: Agvs | None = None
+) -> CanSettings:
     """What robot ``robot``'s ``robot.toml`` says in its ``[can]`` table in a CAN run
     (written by :func:`bridge.config.can_table`), which its AGV bridge (``heft bridge``)
     reads beside the agent's part: its robot's bus, as the plant opens it; node id = robot
-    id; the tick from the plant's ``Sync`` frames."""
+    id; the tick from the plant's ``Sync`` frames; the scenario's AGV profile and admittance
+    loop (``[agvs]``, ``[agvs.admittance]``; none: force drives)."""
+    agvs = agvs or Agvs()
     return CanSettings(
         interface=can.interface,
         channel=can.channel_of(robot),
         node=robot,
         watchdog_ms=int(watchdog_ms),
         time_source="sync",
+        profile=agvs.profile,
+        admittance=agvs.admittance,
     )
 
 
@@ -549,7 +555,8 @@ def run_zenoh(
                             text = robot_toml(i, scenario, team, clock, router, faults)
                             if can is not None:
                                 watchdog_ms = bridge_watchdog_ms(scenario, clock)
-                                text += can_table(can_settings(i, can, watchdog_ms))
+                                settings = can_settings(i, can, watchdog_ms, scenario.agvs)
+                                text += can_table(settings)
                             config.write_text(text, encoding="utf-8")
                             if can is not None:
                                 args = ["bridge", "--config", str(config)]

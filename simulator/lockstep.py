@@ -19,6 +19,19 @@ the plant process has the buses themselves (:class:`~simulator.can_drivers.CanDr
 the run in one process their stand-in as the ``link`` of :class:`PlantTicks`
 (:class:`~simulator.can_drivers.CanQuantiser`).
 
+Each robot's part of steps 1 and 3 is its :class:`Drive`'s. A force drive (the paper's robot)
+passes the sample and the force across the link. A velocity-commanded base (``[agvs] profile
+= "velocity"``) is behind an admittance loop (:mod:`bridge.admittance`), which its AGV bridge
+runs over CAN and :class:`AdmittanceDrive` in one process, in the same order:
+
+1. the base's velocity and the sensor's raw force of ``t_k`` cross the link; the loop tares
+   the force (``f_k = adm.measure(raw_k)``), and the agent gets the velocity and ``f_k``;
+2. the agent answers with its force ``u_k``;
+3. the loop turns it into the base's velocity ``v_k = adm.step(u_k)``, which crosses the link
+   (a ``MotionCommand``) to the base for ``[t_k, t_{k+1})``.
+
+So a lockstep run in one process with the CAN link equals the run over the buses.
+
 The run's end (:class:`RunEnd`), decided on the team's state, never on message timing:
 
 - *done*: every robot is done, and the scenario's ``end_tick`` (its load changes and hold) has
@@ -39,6 +52,7 @@ a run over processes out of simulated time is judged at the newest such instant 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
@@ -48,6 +62,8 @@ from agent.platform.geometry import Vec2
 from agent.platform.protocol import Measurement, Phase, Truth
 
 if TYPE_CHECKING:
+    from bridge.admittance import Admittance
+    from simulator.plant import Plant
     from simulator.scenario import Scenario
 
 ALIGN_TICKS = 64
@@ -62,23 +78,130 @@ class Link(Protocol):
     quantisation: :class:`~simulator.can_drivers.CanQuantiser`)."""
 
     def measurement(self, m: Measurement) -> Measurement:
-        """``m`` as the robot's agent gets it."""
+        """``m`` as the robot's agent (or its AGV bridge) gets it."""
         ...
 
     def force(self, force: Vec2) -> Vec2:
         """A commanded force as the robot's drive gets it."""
         ...
 
+    def loop_force(self, force: Vec2) -> Vec2:
+        """An agent's force as the admittance loop on its AGV bridge takes it (velocity
+        profile)."""
+        ...
+
+    def velocity(self, velocity: Vec2) -> Vec2:
+        """A commanded velocity as the robot's base gets it (velocity profile)."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class VelocityCommand:
+    """The velocity (m/s, ``W``) robot ``robot``'s base drives at from ``tick`` until the next:
+    what an AGV bridge's ``MotionCommand`` tells the plant (velocity profile over CAN)."""
+
+    robot: int
+    tick: int
+    velocity: Vec2
+
+
+class Drive(Protocol):
+    """One robot's side of the tick: what its agent gets of its sample, and what the plant
+    gets of its command (see the module docstring)."""
+
+    def measurement(self, m: Measurement) -> Measurement:
+        """Step 1: the plant's sample ``m`` as the robot's agent gets it."""
+        ...
+
+    def command(self, value: Vec2) -> None:
+        """Step 3: the command the robot answered with, given to the plant for the period."""
+        ...
+
+
+class ForceDrive:
+    """A force drive (``[actuators]``, the paper's robots): the agent's force goes to the
+    plant as the link carries it."""
+
+    def __init__(self, plant: Plant, robot: int, link: Link | None):
+        self.plant, self.robot, self.link = plant, robot, link
+
+    def measurement(self, m: Measurement) -> Measurement:
+        return m if self.link is None else self.link.measurement(m)
+
+    def command(self, value: Vec2) -> None:
+        self.plant.command(self.robot, value if self.link is None else self.link.force(value))
+
+
+class AdmittanceDrive:
+    """A velocity-commanded base with its admittance loop (:mod:`bridge.admittance`), as its
+    AGV bridge runs it: the sensor's raw force, as the link carries it, is tared into the force
+    the agent gets (:meth:`~bridge.admittance.Admittance.measure`), and the agent's force (as
+    the bridge takes it) becomes the base's velocity
+    (:meth:`~bridge.admittance.Admittance.step`), as the link carries it."""
+
+    def __init__(self, plant: Plant, robot: int, admittance: Admittance, link: Link | None):
+        self.plant, self.robot, self.link = plant, robot, link
+        self.admittance = admittance
+
+    def measurement(self, m: Measurement) -> Measurement:
+        if self.link is not None:
+            m = self.link.measurement(m)
+        return dataclasses.replace(m, force=self.admittance.measure(m.force))
+
+    def command(self, value: Vec2) -> None:
+        link = self.link
+        if link is None:
+            self.plant.command_velocity(self.robot, self.admittance.step(value))
+            return
+        velocity = self.admittance.step(link.loop_force(value))
+        self.plant.command_velocity(self.robot, link.velocity(velocity))
+
+
+class BaseDrive:
+    """A velocity-commanded base whose admittance loop runs on its AGV bridge (over CAN): the
+    plant's raw sample goes out as it is (the buses quantise it), and the command is the
+    bridge's velocity."""
+
+    def __init__(self, plant: Plant, robot: int):
+        self.plant, self.robot = plant, robot
+
+    def measurement(self, m: Measurement) -> Measurement:
+        return m
+
+    def command(self, value: Vec2) -> None:
+        self.plant.command_velocity(self.robot, value)
+
+
+def drives(scenario: Scenario, plant: Plant, link: Link | None, bridged: bool) -> list[Drive]:
+    """Each robot's :class:`Drive`, robot 1 first: force drives, or velocity-commanded bases
+    (``scenario.agvs``) whose admittance loops run here unless ``bridged`` (on the AGV
+    bridges)."""
+    robots = range(1, scenario.n + 1)
+    agvs = scenario.agvs
+    if not agvs.velocity:
+        return [ForceDrive(plant, robot, link) for robot in robots]
+    if bridged:
+        return [BaseDrive(plant, robot) for robot in robots]
+    from bridge.admittance import Admittance
+
+    return [
+        AdmittanceDrive(plant, robot, Admittance(agvs.admittance, scenario.period_s), link)
+        for robot in robots
+    ]
+
 
 class PlantTicks:
     """The plant of ``scenario``, tick by tick (see the module docstring); ``link`` (if given)
-    stands for what carries the values between the robots and their agents."""
+    stands for what carries the values between the robots and their agents; ``bridged``: the
+    robots' AGV bridges run the velocity-commanded bases' admittance loops (a run over CAN),
+    the plant takes their velocities (:class:`VelocityCommand`)."""
 
-    def __init__(self, scenario: Scenario, link: Link | None = None):
+    def __init__(self, scenario: Scenario, link: Link | None = None, bridged: bool = False):
         from simulator.plant import Plant  # pymunk: not for the commands' parsers
 
         self.plant = Plant(scenario)
         self.link = link
+        self.drives = drives(scenario, self.plant, link, bridged)
 
     @property
     def tick(self) -> int:
@@ -93,20 +216,17 @@ class PlantTicks:
     def measure(self) -> list[Measurement]:
         """Step 1: every robot's measurement of tick ``k``, robot 1 first, as its agent gets
         it."""
-        measurements = self.plant.measure()
-        if self.link is not None:
-            measurements = [self.link.measurement(m) for m in measurements]
-        return measurements
+        return [d.measurement(m) for d, m in zip(self.drives, self.plant.measure())]
 
-    def apply(self, forces: Sequence[Vec2], truth: bool = True) -> Truth | None:
-        """Step 3: robot ``i`` holds ``forces[i − 1]`` (as it gets it) over ``[t_k, t_{k+1})``;
-        the plant advances to ``t_{k+1}``. Returns the truth of ``t_k`` (``None`` unless
+    def apply(self, commands: Sequence[Vec2], truth: bool = True) -> Truth | None:
+        """Step 3: robot ``i``'s command ``commands[i − 1]`` (its force; a bridged base's
+        velocity) goes to the plant through its :class:`Drive` for ``[t_k, t_{k+1})``; the
+        plant advances to ``t_{k+1}``. Returns the truth of ``t_k`` (``None`` unless
         ``truth``)."""
-        link, plant = self.link, self.plant
-        for robot, force in enumerate(forces, start=1):
-            plant.command(robot, force if link is None else link.force(force))
-        now = plant.truth() if truth else None
-        plant.advance()
+        for drive, command in zip(self.drives, commands):
+            drive.command(command)
+        now = self.plant.truth() if truth else None
+        self.plant.advance()
         return now
 
 

@@ -19,6 +19,9 @@ Each tick is :mod:`simulator.lockstep`'s, the in-process run's, and so is the la
   :data:`WATCHDOG_TICKS` ticks old gets zero force until it answers again (counted as
   missing): a robot cut off from the network stops pushing.
 
+With velocity-commanded bases behind AGV bridges (``[agvs] profile = "velocity"`` over CAN)
+the commands are the bridges' velocities, and zero is a standstill (the base brakes).
+
 Robots whose agent's liveliness ends get zero force until it is back (the robot's agent
 restarted, or its link up again): then the plant applies its commands again, as a real AGV
 would.
@@ -51,7 +54,7 @@ from agent.platform.robot_io import AgentsPort, Liveliness
 from agent.platform.statistics import percentile
 from agent.platform.zenoh_robot_io import ZenohAgentsPort
 from agent.platform.zenoh_session import ZenohSettings, open_session
-from simulator.lockstep import PlantTicks, RunEnd
+from simulator.lockstep import PlantTicks, RunEnd, VelocityCommand
 from simulator.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -85,10 +88,13 @@ class PlantNode:
         clock: str = "lockstep",
         stop: threading.Event | None = None,
         start_timeout_s: float = 30.0,
+        bridged: bool = False,
     ):
         self.scenario = scenario
-        self.plant = PlantTicks(scenario)
-        """The plant, tick by tick (the port carries the values: the buses quantise them)."""
+        self.plant = PlantTicks(scenario, bridged=bridged)
+        """The plant, tick by tick (the port carries the values: the buses quantise them;
+        ``bridged``: the robots' AGV bridges run their admittance loops and command their
+        bases' velocities, :class:`~simulator.lockstep.VelocityCommand`)."""
         self.geometry = scenario.load_geometry()
         self.port = port
         self.clock = clock
@@ -100,7 +106,7 @@ class PlantNode:
         self.silent: set[int] = set()
         """Realtime: robots whose commands stopped (the watchdog gives them zero force)."""
         """What of each lost robot is gone (``agent``, ``bridge``) until it comes back."""
-        self.commands: dict[int, Command] = {}
+        self.commands: dict[int, Command | VelocityCommand] = {}
         self.late = 0
         self.missing = 0
         self.overruns = 0
@@ -114,7 +120,7 @@ class PlantNode:
 
     # ------------------------------------------------------------------ events
     def _handle(self, arrived: float, item) -> None:
-        if isinstance(item, Command):
+        if isinstance(item, (Command, VelocityCommand)):
             if item.tick > self.plant.tick:
                 why = "tick from the future"
                 self.port.rejects("command", f"tick {item.tick} at tick {self.plant.tick}", why)
@@ -187,13 +193,13 @@ class PlantNode:
         return silent
 
     def _apply(self) -> None:
-        forces = [self._force(robot) for robot in range(1, self.scenario.n + 1)]
-        self.port.report(self.plant.apply(forces))
+        commands = [self._command(robot) for robot in range(1, self.scenario.n + 1)]
+        self.port.report(self.plant.apply(commands))
 
-    def _force(self, robot: int) -> Vec2:
-        """Robot ``robot``'s force for this tick: its newest command's, or zero when it is
-        lost, has sent none or (on the wall clock) has been silent too long; late and missing
-        commands counted."""
+    def _command(self, robot: int) -> Vec2:
+        """Robot ``robot``'s force for this tick (a bridged base's velocity): its newest
+        command's, or zero when it is lost, has sent none or (on the wall clock) has been
+        silent too long; late and missing commands counted."""
         k = self.plant.tick
         command = self.commands.get(robot)
         if robot in self.lost or command is None:
@@ -217,7 +223,7 @@ class PlantNode:
             log.info("robot %d: answering again at t = %.2f s", robot, self.plant.time_s)
         if command.tick < k:
             self.late += 1
-        return command.force
+        return command.force if isinstance(command, Command) else command.velocity
 
     def _everyone_answered(self) -> bool:
         k = self.plant.tick
@@ -350,6 +356,7 @@ def run_plant(
                 return PlantNode(scenario, port, clock, stop, start_timeout_s).run()
             finally:
                 port.close()
+    from bridge.codec import AgvCodec
     from simulator.can_drivers import CanDriversPort, close_buses, open_buses
 
     buses = open_buses(can, robots)
@@ -360,9 +367,10 @@ def run_plant(
     try:
         with open_session(zenoh) as session:
             rest = ZenohAgentsPort(session, Keys(team), robots, rejects, bridges=True)
-            port = CanDriversPort(rest, buses, clock)
+            port = CanDriversPort(rest, buses, clock, AgvCodec(scenario.agvs.profile))
             try:
-                return PlantNode(scenario, port, clock, stop, start_timeout_s).run()
+                node = PlantNode(scenario, port, clock, stop, start_timeout_s, bridged=True)
+                return node.run()
             finally:
                 port.close()
     finally:

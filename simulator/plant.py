@@ -27,6 +27,16 @@ reports ``f_i`` averaged over the tick's substeps (what the load felt), plus the
 The gains and the actuator noise come from a random stream of their own (:data:`ACTUATOR_STREAM`),
 so a run's sensor noise is the same with actuators ideal or not.
 
+Velocity-commanded bases (``scenario.agvs``, ``profile = "velocity"``): each robot is a base
+with a speed loop holding the load through a spring and damper (:mod:`simulator.bases`, whose
+docstring has the model's equations), integrated per physics substep with the load. The robots
+then take velocity commands (:meth:`Plant.command_velocity`) and measure their base's velocity
+and the raw force of the force/torque sensor in their contact: the contact's force averaged
+over the tick, plus the sensor's bias (:attr:`Plant.biases`, from a random stream of its own,
+:data:`simulator.bases.SENSOR_BIAS_STREAM`) and noise. The admittance loop that turns the
+agents' forces into those velocities is the AGV's (:mod:`bridge.admittance`; in one process
+:class:`simulator.lockstep.PlantTicks` runs it).
+
 Load changes (``scenario.events``): at the first tick at or after a change's ``at_s`` the body
 takes its new mass, moment and COM before the period is integrated (:meth:`Plant.change_load`).
 The load frame stays where it is, and so do the contacts and their velocities; only the COM
@@ -57,6 +67,7 @@ from pymunk import Vec2d
 
 from agent.platform.geometry import Vec2
 from agent.platform.protocol import Measurement, Truth
+from simulator.bases import Bases, sensor_biases
 from simulator.friction import GroundContact
 
 if TYPE_CHECKING:
@@ -129,6 +140,23 @@ class Plant:
         """How far a drive's force goes towards its target in one substep."""
         self._drive_force: list[Vec2] = [_ZERO] * self._n
         """Each drive's force now (with a lag it carries over from one tick to the next)."""
+        agvs = scenario.agvs
+        self._bases: Bases | None = None
+        """The velocity-commanded bases (:mod:`simulator.bases`); None: force drives."""
+        self.biases: tuple[Vec2, ...] = ((0.0, 0.0),) * self._n
+        """Each robot's force/torque sensor bias (N; zero with force drives)."""
+        if agvs.velocity:
+            contacts = [body.local_to_world(p) for p in self._local]
+            self._bases = Bases(
+                [(p.x, p.y) for p in contacts],
+                agvs.speed_time_constant_s,
+                agvs.max_accel,
+                agvs.max_speed,
+                agvs.contact_stiffness,
+                agvs.contact_damping,
+                self._dt,
+            )
+            self.biases = sensor_biases(scenario.run.seed, self._n, agvs.sensor_bias_std)
         self._events = list(scenario.events)
         """The load changes still to come, first first."""
         self._start: Vec2 = self._com_position()
@@ -143,6 +171,11 @@ class Plant:
         return self._n
 
     @property
+    def bases(self) -> Bases | None:
+        """The velocity-commanded bases (:mod:`simulator.bases`); None with force drives."""
+        return self._bases
+
+    @property
     def time_s(self) -> float:
         """Time of the current tick, ``tick * period``."""
         return self.tick * self._period
@@ -151,13 +184,19 @@ class Plant:
         """Every robot's sample at the current tick (index ``robot - 1``).
 
         ``velocity`` is the contact point's velocity, ``force`` the force applied during the
-        last period (zero at tick 0), each plus ``N(0, σ²)`` noise per axis when σ > 0.
+        last period (zero at tick 0), each plus ``N(0, σ²)`` noise per axis when σ > 0. With
+        velocity-commanded bases (:mod:`simulator.bases`): the base's velocity and the raw
+        force of the sensor in its contact, its bias included (the admittance loop tares it).
         """
-        body = self._body
-        to_world = body.local_to_world
-        velocity_at = body.velocity_at_world_point
-        velocities = [velocity_at(to_world(p)) for p in self._local]
         forces = self._applied
+        if self._bases is None:
+            body = self._body
+            to_world = body.local_to_world
+            velocity_at = body.velocity_at_world_point
+            velocities = [velocity_at(to_world(p)) for p in self._local]
+        else:
+            velocities = list(self._bases.velocity)
+            forces = tuple((f[0] + b[0], f[1] + b[1]) for f, b in zip(forces, self.biases))
         tick, time_s, n = self.tick, self.time_s, self._n
         if self._velocity_noise > 0.0:
             dv = self._rng.normal(0.0, self._velocity_noise, size=(n, 2)).tolist()
@@ -172,26 +211,45 @@ class Plant:
                 robot=i + 1,
                 tick=tick,
                 time_s=time_s,
-                velocity=(v.x + dv[i][0], v.y + dv[i][1]),
+                velocity=(v[0] + dv[i][0], v[1] + dv[i][1]),
                 force=(forces[i][0] + df[i][0], forces[i][1] + df[i][1]),
             )
             for i, v in enumerate(velocities)
         ]
 
     def command(self, robot: int, force: Sequence[float]) -> None:
-        """Hold ``force`` (in ``W``) at robot ``robot``'s contact from the next :meth:`advance`.
+        """Hold ``force`` (in ``W``) at robot ``robot``'s contact from the next :meth:`advance`
+        (force drives).
 
-        Raises :class:`ValueError` if ``robot`` is not in ``1..n`` or ``force`` is not two
-        finite numbers.
+        Raises :class:`ValueError` if ``robot`` is not in ``1..n``, ``force`` is not two
+        finite numbers, or the robots are velocity-commanded bases.
         """
+        if self._bases is not None:
+            raise ValueError("the robots are velocity-commanded bases: use command_velocity")
+        self._commanded[robot - 1] = self._vector(robot, force, "force")
+
+    def command_velocity(self, robot: int, velocity: Sequence[float]) -> None:
+        """Robot ``robot``'s base drives at ``velocity`` (m/s, in ``W``) from the next
+        :meth:`advance` (``[agvs] profile = "velocity"``, :mod:`simulator.bases`).
+
+        Raises :class:`ValueError` if ``robot`` is not in ``1..n``, ``velocity`` is not two
+        finite numbers, or the robots are force drives.
+        """
+        if self._bases is None:
+            raise ValueError("the robots are force drives: use command")
+        self._bases.command(robot - 1, self._vector(robot, velocity, "velocity"))
+
+    def _vector(self, robot: int, value: Sequence[float], name: str) -> Vec2:
+        """``value`` for robot ``robot`` as two floats; :class:`ValueError` unless the robot is
+        in ``1..n`` and they are two finite numbers."""
         if isinstance(robot, bool) or not isinstance(robot, int) or not 1 <= robot <= self._n:
             raise ValueError(f"robot must be an integer in 1..{self._n}, got {robot!r}")
-        if len(force) != 2:
-            raise ValueError(f"force must have two components, got {force!r}")
-        fx, fy = float(force[0]), float(force[1])
-        if not (math.isfinite(fx) and math.isfinite(fy)):
-            raise ValueError(f"force must be finite, got {force!r}")
-        self._commanded[robot - 1] = (fx, fy)
+        if len(value) != 2:
+            raise ValueError(f"{name} must have two components, got {value!r}")
+        x, y = float(value[0]), float(value[1])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError(f"{name} must be finite, got {value!r}")
+        return (x, y)
 
     def advance(self) -> None:
         """Integrate one sensor period: ``substeps`` steps of ``1 / physics_hz``, the held
@@ -209,7 +267,9 @@ class Plant:
         ground = self._ground
         if ground is not None:
             ground.start_tick()
-        if self._ideal:
+        if self._bases is not None:
+            self._advance_bases()
+        elif self._ideal:
             self._advance_ideal()
         else:
             self._advance_through_drives()
@@ -232,6 +292,35 @@ class Plant:
             c, s = math.cos(angle), math.sin(angle)
             substep(force, c * cross_sum - s * dot_sum, c, s)
         self._applied = applied
+
+    def _advance_bases(self) -> None:
+        """:meth:`advance` with velocity-commanded bases (:mod:`simulator.bases`): per physics
+        step, each contact's force from its base and the load's contact point (``p_Ci = p_C +
+        r_i``, ``ṗ_Ci = ṗ_C + ω r_i⊥``, ``r_i = R(θ) a_i``), their sum and torque ``Σ r_i × f_i``
+        on the load, then the bases' step. The forces' mean over the period is what the
+        sensors report."""
+        n, bases, arms, cog = self._n, self._bases, self._arms, self._cog
+        assert bases is not None
+        total = [[0.0, 0.0] for _ in range(n)]
+        body, substep = self._body, self._substep
+        for _ in range(self._substeps):
+            angle = body.angle
+            c, s = math.cos(angle), math.sin(angle)
+            com, velocity, omega = body.local_to_world(cog), body.velocity, body.angular_velocity
+            arms_w = [(c * a[0] - s * a[1], s * a[0] + c * a[1]) for a in arms]
+            points = [(com.x + r[0], com.y + r[1]) for r in arms_w]
+            moving = [(velocity.x - omega * r[1], velocity.y + omega * r[0]) for r in arms_w]
+            fx = fy = torque = 0.0
+            for r, f, acc in zip(arms_w, bases.forces(points, moving), total):
+                fx += f[0]
+                fy += f[1]
+                torque += r[0] * f[1] - r[1] * f[0]
+                acc[0] += f[0]
+                acc[1] += f[1]
+            substep(Vec2d(fx, fy), torque, c, s)
+            bases.step()
+        m = self._substeps
+        self._applied = tuple((acc[0] / m, acc[1] / m) for acc in total)
 
     def _free_step(self, force: Vec2d, torque: float, cos: float, sin: float) -> None:
         """One physics step of the frictionless plant: ``force`` at the COM, ``torque`` about

@@ -20,6 +20,8 @@ A scenario is a TOML file (``simulator/scenarios/paper.toml`` is the paper's Sec
     static = 0.03             # μ_s >= μ, breakaway; omitted -> coulomb
     viscous = 0.0             # N s/m for the whole load
     supports = [[x, y], ...]  # load frame; omitted -> the weight over the polygon's area
+    [agvs]                    # optional: the AGVs; none -> force drives ([actuators])
+    profile = "velocity"      # velocity-commanded bases pushing through compliant contacts
     [run]
     seed = 1
     [[events]]                # optional, any number: the load changes at at_s
@@ -62,6 +64,7 @@ from agent.platform.config import (
 )
 from agent.platform.geometry import Vec2
 from agent.platform.protocol import GRAVITY, LoadGeometry
+from bridge.admittance import AdmittanceSettings
 from simulator.polygon import (
     area_cells,
     distance_to_boundary,
@@ -226,6 +229,63 @@ class Actuators:
             if not 0.5 <= gain <= 1.5:
                 key = f"{where}.gains[{i}]"
                 raise ConfigError(f"{key}: expected a number in [0.5, 1.5], got {gain!r}")
+
+
+MAX_CONTACT_STEP = 0.5
+"""The largest ``ω_max / physics_hz`` of the contacts' springs on the load (rad per physics
+step), and the largest ``C λ / physics_hz`` of their dampers (:func:`_check_contact_rate`):
+the explicit step is stable below 2, and within 0.5 it follows the contact's motion to a few
+per cent."""
+
+
+@dataclass(frozen=True)
+class Agvs:
+    """The robots' AGVs (``[agvs]``; none: force drives, as in the paper).
+
+    With ``profile = "velocity"`` each robot ``i`` is a base at ``x_i`` with velocity ``v_i``
+    (world frame) under a speed loop ``v̇_i = clamp((v_cmd,i − v_i)/τ, max_accel)``,
+    ``‖v_i‖ ≤ max_speed``, holding the load at ``C_i`` through a spring and damper,
+    ``f_i = K (x_i − p_Ci) + C (v_i − ṗ_Ci)``; a force/torque sensor in the contact measures
+    ``f_i`` plus a bias drawn per robot from the seed and ``sensors.force_noise_std``. The
+    agent's force command reaches the base through the admittance loop
+    (:mod:`bridge.admittance`) of ``admittance`` (:mod:`simulator.bases`)."""
+
+    profile: str = "force"
+    """``force`` (the paper's robots, ``[actuators]``) or ``velocity``: the CAN protocol's
+    profiles (:data:`bridge.dbc.PROFILES`)."""
+    speed_time_constant_s: float = bounded(0.05, 0.001, 1, "s")
+    """``τ``: the base's speed loop, first order."""
+    max_accel: float = bounded(3.0, 0, 100, "m/s²", open_low=True)
+    """The base's own acceleration limit."""
+    max_speed: float = bounded(4.0, 0, 16, "m/s", open_low=True)
+    """The base's own speed limit."""
+    contact_stiffness: float = bounded(3000.0, 10, 1_000_000, "N/m")
+    """``K``: the contact's spring; 1000 (soft foam) to 10 000 (a sprung bumper) is the range
+    the admittance loop is made for."""
+    contact_damping: float = bounded(20.0, 0, 10_000, "N s/m")
+    """``C``: the contact's damper."""
+    sensor_bias_std: float = bounded(0.3, 0, 100, "N")
+    """N per axis: each robot's force/torque sensor's bias, drawn once per run from the seed
+    (the admittance loop tares it at start-up)."""
+    admittance: AdmittanceSettings = AdmittanceSettings()
+    """The admittance loop's gains and limits (``[agvs.admittance]``): in one process the
+    plant's; over CAN written into every bridge's ``[can.admittance]``."""
+
+    @property
+    def velocity(self) -> bool:
+        """Whether the robots are velocity-commanded bases."""
+        return self.profile == "velocity"
+
+    def validate(self, where: str) -> None:
+        """Raise :class:`ConfigError` naming the key unless the profile is known and every
+        field is in its range."""
+        from bridge.dbc import PROFILES  # cantools: only for a scenario with [agvs]
+
+        if self.profile not in PROFILES:
+            raise ConfigError(
+                f"{where}.profile: expected one of {', '.join(PROFILES)}, got {self.profile!r}"
+            )
+        check_bounds(self, where)
 
 
 @dataclass(frozen=True)
@@ -422,6 +482,8 @@ class Scenario:
     """The load's changes during the run, in time order."""
     ground: Ground | None = None
     """The floor's friction; None: frictionless, as in the paper."""
+    agvs: Agvs = Agvs()
+    """The AGVs: force drives (the default) or velocity-commanded bases."""
 
     @property
     def end_s(self) -> float:
@@ -541,6 +603,7 @@ _TOP_LEVEL: dict[str, str | None] = {
     "agent": None,
     "events": None,
     "ground": None,
+    "agvs": None,
 }
 
 
@@ -754,6 +817,14 @@ def _parse(data: Any) -> Scenario:
     floor = from_table(Floor, data.get("floor", {}), "floor")
     events = _parse_events(data.get("events", []), body, run)
     ground = None if "ground" not in data else _parse_ground(data["ground"], body, events)
+    agvs = from_table(Agvs, data.get("agvs", {}), "agvs")
+    if agvs.velocity:
+        if "actuators" in data:
+            raise ScenarioError(
+                "actuators: models force drives; the AGVs of agvs.profile = velocity are bases"
+                " with a speed loop (agvs.speed_time_constant_s, max_accel, max_speed)"
+            )
+        _check_contact_rate(agvs, body, contacts, events, run)
     return Scenario(
         name,
         body,
@@ -767,7 +838,38 @@ def _parse(data: Any) -> Scenario:
         floor,
         events,
         ground,
+        agvs,
     )
+
+
+def _check_contact_rate(
+    agvs: Agvs,
+    body: Body,
+    contacts: tuple[Vec2, ...],
+    events: tuple[LoadChange, ...],
+    run: RunSettings,
+) -> None:
+    """Raise unless the physics steps resolve the contacts' springs and dampers on every load of
+    the run. With ``λ = Σ_i (2/m + ‖C_i − p_C‖²/J)`` (the trace of ``M⁻¹`` mapped to the
+    contacts, which bounds the largest eigenvalue of the load's three degrees of freedom on
+    ``n`` unit springs), ``ω_max = √(K λ)`` and ``C λ`` are each within
+    :data:`MAX_CONTACT_STEP` per physics step."""
+    loads = [body]
+    for event in events:
+        loads.append(event.applied_to(loads[-1]))
+    worst = max(
+        sum(2.0 / b.mass + math.dist(c, b.com) ** 2 / b.moment for c in contacts) for b in loads
+    )
+    omega = math.sqrt(agvs.contact_stiffness * worst)
+    rate = agvs.contact_damping * worst
+    if max(omega, rate) / run.physics_hz > MAX_CONTACT_STEP:
+        key, value = "contact_stiffness", f"{agvs.contact_stiffness:g} N/m"
+        if rate > omega:
+            key, value = "contact_damping", f"{agvs.contact_damping:g} N s/m"
+        raise ScenarioError(
+            f"run.physics_hz: expected at least {max(omega, rate) / MAX_CONTACT_STEP:.4g} Hz"
+            f" for agvs.{key} = {value} on this load, got {run.physics_hz!r}"
+        )
 
 
 def _parse_ground(table: Any, body: Body, events: tuple[LoadChange, ...]) -> Ground:
@@ -954,6 +1056,10 @@ def scenario_to_toml(s: Scenario) -> str:
         lines += ["", "[floor]", *floor]
     if s.ground is not None:
         lines += ["", *_toml_ground(s.ground)]
+    agvs = toml_fields(s.agvs, only_changed=True)
+    admittance = toml_tables(s.agvs, "agvs.", only_changed=True)
+    if agvs or admittance:
+        lines += ["", "[agvs]", *agvs, *admittance]
     lines += ["", "[run]", *toml_fields(s.run)]
     agent = toml_fields(s.agent, only_changed=True)
     if agent:

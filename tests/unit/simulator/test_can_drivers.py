@@ -22,18 +22,31 @@ from agent.platform.process import EventQueue, RejectLog
 from agent.platform.protocol import Command, Estimates, Measurement, Phase, Truth
 from agent.platform.robot_io import AgentsPort, InMemoryRobots, Liveliness
 from agent.platform.transport import InMemoryTransport
+from bridge.admittance import Admittance
 from bridge.codec import (
     AgvCodec,
     AppliedForce,
     ForceCommand,
+    ForceTorque,
     Heartbeat,
+    MotionCommand,
+    MotionFeedback,
     Odometry,
     Sync,
+    clamp_command_velocity,
     clamp_force,
 )
 from bridge.dbc import MAX_SPEED
-from simulator.can_drivers import ACTIVE, READY, CanDriversPort, CanLink, CanQuantiser
+from simulator.can_drivers import (
+    ACTIVE,
+    FEEDBACK,
+    READY,
+    CanDriversPort,
+    CanLink,
+    CanQuantiser,
+)
 from simulator.inprocess import run_inprocess
+from simulator.lockstep import RunEnd, VelocityCommand
 from simulator.node import PlantNode
 from simulator.scenario import load_scenario
 from tests.helpers.accuracy import worst_errors
@@ -383,12 +396,23 @@ def test_an_unknown_link_is_refused() -> None:
 # ------------------------------------------------------------------------------ nodes
 class StandInBridges:
     """A minimal stand-in for the AGV bridges: robot i's frames of a tick → its agent's
-    measurement (``time_s = tick × period``), its agent's command → a ForceCommand frame."""
+    measurement (``time_s = tick × period``), its agent's command → a ForceCommand frame; with
+    admittance ``loops`` (velocity profile), the raw force tared by robot i's loop, and its
+    velocity for the agent's force → a MotionCommand frame."""
 
-    def __init__(self, buses: Buses, hub_port: AgentsPort, period_s: float) -> None:
+    def __init__(
+        self,
+        buses: Buses,
+        hub_port: AgentsPort,
+        period_s: float,
+        codec: AgvCodec = CODEC,
+        loops: dict[int, Admittance] | None = None,
+    ) -> None:
         self.buses = buses
         self.hub_port = hub_port
         self.period_s = period_s
+        self.codec = codec
+        self.loops = loops
         self.stop = threading.Event()
         self.threads = [
             threading.Thread(target=self._frames, args=(i,), daemon=True) for i in buses.peer
@@ -399,25 +423,36 @@ class StandInBridges:
 
     def _frames(self, robot: int) -> None:
         tick, velocity = -1, None
+        sampled, measured = FEEDBACK[self.codec.profile]
         while not self.stop.is_set():
             message = self.buses.peer[robot].recv(0.05)
             if message is None:
                 continue
-            frame = CODEC.decode(message)
+            frame = self.codec.decode(message)
             if isinstance(frame, Sync):
                 tick, velocity = frame.tick, None
-            elif isinstance(frame, Odometry) and frame.counter == tick % 16:
+            elif isinstance(frame, sampled) and frame.counter == tick % 16:
                 velocity = frame.velocity
-            elif isinstance(frame, AppliedForce) and velocity is not None:
-                m = Measurement(robot, tick, tick * self.period_s, velocity, frame.force)
+            elif isinstance(frame, measured) and velocity is not None:
+                force = (
+                    frame.force if self.loops is None else self.loops[robot].measure(frame.force)
+                )
+                m = Measurement(robot, tick, tick * self.period_s, velocity, force)
                 self.hub_port.send(m)
 
     def _commands(self) -> None:
         while not self.stop.is_set():
             for _, item in self.hub_port.poll(0.05):
-                if isinstance(item, Command):
+                if not isinstance(item, Command):
+                    continue
+                if self.loops is None:
                     force, _ = clamp_force(item.force)
                     self.buses.command(item.robot, item.tick % 16, force)
+                    continue
+                force, _ = clamp_force(item.force)
+                velocity, _ = clamp_command_velocity(self.loops[item.robot].step(force))
+                frame = MotionCommand(item.robot, item.tick % 16, velocity)
+                self.buses.peer[item.robot].send(self.codec.encode(frame))
 
     def close(self) -> None:
         self.stop.set()
@@ -425,12 +460,10 @@ class StandInBridges:
             thread.join(timeout=5)
 
 
-@pytest.mark.slow
-def test_plant_node_on_can_in_lockstep_reproduces_the_inprocess_can_run() -> None:
-    """PlantNode on the CAN port, stand-in bridges and the agent nodes, all on threads:
-    exactly the in-process run quantised as CAN quantises."""
-    scenario = load_scenario(PAPER)
-    here = run_inprocess(scenario, link="can")
+def _on_can(scenario, until, codec: AgvCodec = CODEC):
+    """PlantNode on the CAN port of ``codec``'s profile, stand-in bridges (with admittance
+    loops for velocity bases) and the agent nodes, all on threads, until ``until(estimates,
+    truths, done)`` returns something (or 120 s): that, and the port."""
     n = scenario.n
     neighbours = {i: scenario.neighbours(i) for i in range(1, n + 1)}
     reports: queue.SimpleQueue = queue.SimpleQueue()
@@ -453,13 +486,17 @@ def test_plant_node_on_can_in_lockstep_reproduces_the_inprocess_can_run() -> Non
         for i in neighbours
     ]
     buses = Buses(tuple(neighbours))
-    bridges = StandInBridges(buses, hub.robots_port(), scenario.period_s)
+    bridged = scenario.agvs.velocity
+    loops = None
+    if bridged:
+        loops = {i: Admittance(scenario.agvs.admittance, scenario.period_s) for i in neighbours}
+    bridges = StandInBridges(buses, hub.robots_port(), scenario.period_s, codec, loops)
     rest = StubRest(tuple(neighbours))
     rest.report = reports.put
     for i in neighbours:
         rest.up(i, "agent", "bridge")
-    port = CanDriversPort(rest, buses.plant, "lockstep")
-    plant = PlantNode(scenario, port, "lockstep")
+    port = CanDriversPort(rest, buses.plant, "lockstep", codec)
+    plant = PlantNode(scenario, port, "lockstep", bridged=bridged)
     threads = [threading.Thread(target=x.run, daemon=True) for x in (*nodes, plant)]
     for thread in threads:
         thread.start()
@@ -480,10 +517,7 @@ def test_plant_node_on_can_in_lockstep_reproduces_the_inprocess_can_run() -> Non
                     done[m.robot] = m.phase_since
             elif isinstance(m, Truth):
                 truths[m.tick] = m
-            if len(done) == n:
-                instant = max(done.values())
-                if len(estimates.get(instant, {})) == n and instant in truths:
-                    final = (estimates[instant], truths[instant])
+            final = until(estimates, truths, done)
     finally:
         plant.stop.set()
         hub.stop()
@@ -493,10 +527,54 @@ def test_plant_node_on_can_in_lockstep_reproduces_the_inprocess_can_run() -> Non
         port.close()
         buses.close()
     assert final is not None, "the nodes did not finish within 120 s"
+    return final, port
+
+
+@pytest.mark.slow
+def test_plant_node_on_can_in_lockstep_reproduces_the_inprocess_can_run() -> None:
+    """PlantNode on the CAN port, stand-in bridges and the agent nodes, all on threads:
+    exactly the in-process run quantised as CAN quantises."""
+    scenario = load_scenario(PAPER)
+    here = run_inprocess(scenario, link="can")
+
+    def until(estimates, truths, done):
+        if len(done) == scenario.n:
+            instant = max(done.values())
+            if len(estimates.get(instant, {})) == scenario.n and instant in truths:
+                return estimates[instant], truths[instant]
+        return None
+
+    final, port = _on_can(scenario, until)
     assert final[1] == here.final.truth
     assert final[0] == here.final.estimates  # exactly: the same arithmetic, the same values
     assert port.rejects.total == 0 and port.counts["zero commands"] == 0
     assert math.isclose(final[1].time_s, here.final.time_s)
+
+
+@pytest.mark.slow
+def test_velocity_bases_on_can_in_lockstep_reproduce_the_inprocess_can_run() -> None:
+    """The same with velocity-commanded bases behind their bridges' admittance loops, for the
+    scenario's first 2 s (the plant's every tick, truth and estimates)."""
+    scenario = load_scenario(PAPER.with_name("paper-velocity.toml"))
+    scenario = dataclasses.replace(scenario, run=dataclasses.replace(scenario.run, max_time_s=2.0))
+    here = run_inprocess(scenario, link="can", record_every=1)
+    last = RunEnd.of(scenario).last_tick
+
+    def until(estimates, truths, done):
+        ready = last in truths and len(estimates.get(last - 1, {})) == scenario.n
+        return (estimates, truths) if ready else None
+
+    (estimates, truths), port = _on_can(scenario, until, AgvCodec("velocity"))
+    compared = [s for s in here.history if s.truth.tick < last]
+    assert len(compared) == last
+    for sample in compared:
+        assert truths[sample.truth.tick] == sample.truth
+    published = [s for s in compared if len(estimates.get(s.truth.tick, {})) == scenario.n]
+    assert len(published) >= 40  # (the agents publish every fifth tick)
+    for sample in published:
+        assert estimates[sample.truth.tick] == sample.estimates
+    assert port.rejects.total == 0 and port.counts["stop commands"] == 0
+    assert max(math.hypot(*t.com_velocity) for t in truths.values()) > 0.01  # it was pushed
 
 
 def test_an_event_queue_is_shared_with_the_other_side(rig) -> None:
@@ -538,3 +616,72 @@ def test_heft_run_can_in_one_process_is_the_quantised_reference(tmp_path, capsys
     reference = run_inprocess(load_scenario(PAPER), link="can")
     assert results["sim_time_s"] == reference.sim_time_s
     assert results["robots"]["1"]["mass"] == reference.final.estimates[1].mass
+
+
+# ------------------------------------------------------------------------------ velocity profile
+VELOCITY = AgvCodec("velocity")
+
+
+@pytest.fixture()
+def velocity_rig():
+    """A CAN port of the velocity profile for robots 1 and 2 (lockstep) and the buses."""
+    buses = Buses((1, 2))
+    port = CanDriversPort(
+        StubRest((1, 2)), buses.plant, "lockstep", VELOCITY, heartbeat_period_s=3600.0
+    )
+    yield port, buses
+    port.close()
+    buses.close()
+
+
+def _velocity_frames(buses: Buses, robot: int) -> list:
+    out = []
+    while (message := buses.peer[robot].recv(0.2)) is not None:
+        frame = VELOCITY.decode(message)
+        if not isinstance(frame, Heartbeat):
+            out.append(frame)
+    return out
+
+
+def test_velocity_bases_send_their_velocity_and_raw_force_each_tick(velocity_rig) -> None:
+    port, buses = velocity_rig
+    port.send(Measurement(1, 19, 0.19, (0.25, -1.5), (612.5, -0.123456789)))
+    assert _velocity_frames(buses, 1) == [
+        Sync(19),
+        MotionFeedback(1, 3, (0.25, -1.5)),
+        ForceTorque(1, 3, VELOCITY.quantize_force((500.0, -0.123456789))),
+    ]
+    assert port.counts["force clamped"] == 1
+
+
+def test_a_motion_command_is_the_ticks_velocity_and_stop_is_the_watchdogs(velocity_rig) -> None:
+    port, buses = velocity_rig
+    port.send(Measurement(2, 33, 0.33, (0.0, 0.0), (0.0, 0.0)))
+    send = buses.peer[2].send
+    send(VELOCITY.encode(MotionCommand(2, 1, (0.5, -0.25))))
+    send(VELOCITY.encode(MotionCommand(2, 0, (0.125, 0.0))))  # 32
+    send(VELOCITY.encode(MotionCommand(2, 1, (0.5, 0.5), drive=False)))
+    assert _items(port) == [
+        VelocityCommand(2, 33, (0.5, -0.25)),
+        VelocityCommand(2, 32, (0.125, 0.0)),
+    ]
+    assert port.counts["stop commands"] == 1 and port.counts["zero commands"] == 0
+    # The force profile's command is not a velocity base's: refused and counted.
+    send(CODEC.encode(ForceCommand(2, 1, (1.0, 0.0))))
+    assert _items(port) == []
+    assert port.rejects.reasons == {("can frame", "wrong profile"): 1}
+
+
+def test_a_stop_frame_is_a_standstill_on_the_wall_clock() -> None:
+    buses = Buses((1,))
+    port = CanDriversPort(
+        StubRest((1,)), buses.plant, "realtime", VELOCITY, heartbeat_period_s=3600
+    )
+    try:
+        port.send(Measurement(1, 40, 0.4, (0.0, 0.0), (0.0, 0.0)))
+        buses.peer[1].send(VELOCITY.encode(MotionCommand(1, 5, (1.0, 1.0), drive=False)))
+        assert _items(port) == [VelocityCommand(1, 40, (0.0, 0.0))]
+        assert port.counts["stop commands"] == 1
+    finally:
+        port.close()
+        buses.close()

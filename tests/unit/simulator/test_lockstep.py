@@ -6,14 +6,18 @@ or out of simulated time."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from types import SimpleNamespace
 
 from agent.platform.evaluation import final_instant
 from agent.platform.protocol import Phase
+from bridge.admittance import Admittance
+from bridge.codec import AgvCodec, clamp_force
 from simulator.can_drivers import CanQuantiser
 from simulator.inprocess import run_inprocess
 from simulator.lockstep import PlantTicks, RunEnd, Verdict
-from simulator.scenario import load_scenario
+from simulator.plant import Plant
+from simulator.scenario import Scenario, load_scenario
 from tests.helpers.paths import PAPER
 
 END = RunEnd(end_tick=100, last_tick=1000, period_s=0.01, max_time_s=10.0)
@@ -68,3 +72,48 @@ def test_a_tick_reads_the_truth_before_the_plant_moves_and_forces_cross_the_link
     measured = ticks.measure()
     assert [m.force for m in measured] == [link.force(force)] * paper.n
     assert link.force(force) != force  # (quantised: the test would see a force not carried)
+
+
+def _velocity_scenario(seconds: float) -> Scenario:
+    scenario = load_scenario(PAPER.with_name("paper-velocity.toml"))
+    return dataclasses.replace(scenario, run=dataclasses.replace(scenario.run, max_time_s=seconds))
+
+
+def test_a_velocity_bases_tick_crosses_the_link_through_its_admittance_loop() -> None:
+    """Over CAN: the base's velocity and the sensor's raw force as the velocity profile's codec
+    quantises them, the force tared by the loop; the loop's velocity, quantised as a
+    MotionCommand, is what the base drives at. A twin plant driven by the same velocities and
+    a second set of loops give the same values."""
+    scenario = _velocity_scenario(1.0)
+    codec = AgvCodec("velocity")
+    ticks = PlantTicks(scenario, CanQuantiser(scenario.period_s, codec))
+    twin = Plant(scenario)
+    loops = [Admittance(scenario.agvs.admittance, scenario.period_s) for _ in range(scenario.n)]
+    quantised = moving = 0
+    for k in range(60):
+        measured, raw = ticks.measure(), twin.measure()
+        for m, r, loop in zip(measured, raw, loops):
+            assert m.velocity == codec.quantize_velocity(r.velocity)
+            assert m.force == loop.measure(codec.quantize_force(r.force))
+            quantised += m.velocity != r.velocity
+        forces = [(2.0 * math.cos(k / 7 + i), 1.0) for i in range(scenario.n)]
+        forces[0] = (600.0, -0.5) if k == 45 else forces[0]  # beyond the protocol's ±500 N
+        ticks.apply(forces, truth=False)
+        bases = ticks.plant.bases
+        assert bases is not None
+        for robot, (loop, force) in enumerate(zip(loops, forces), start=1):
+            velocity = codec.quantize_command_velocity(loop.step(clamp_force(force)[0]))
+            assert bases.commanded[robot - 1] == velocity
+            twin.command_velocity(robot, velocity)
+            moving += velocity != (0.0, 0.0)
+        twin.advance()
+    assert quantised > 0 and moving > 100  # (the loops tare for 20 ticks, then drive)
+
+
+def test_an_inprocess_can_run_on_velocity_bases_is_deterministic() -> None:
+    scenario = _velocity_scenario(3.0)
+    first = run_inprocess(scenario, link="can", record_every=1)
+    again = run_inprocess(scenario, link="can", record_every=1)
+    assert first.history == again.history and len(first.history) > 250
+    memory = run_inprocess(scenario, record_every=1)
+    assert memory.history != first.history  # the link's quantisation is in the run

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import re
 import tomllib
@@ -17,9 +18,11 @@ from hypothesis import strategies as st
 from agent.algorithm.tuning import PAPER_REFERENCE, AgentTuning, Estimators
 from agent.platform.config import ConfigError, from_table
 from agent.platform.heft import main
+from bridge.admittance import AdmittanceSettings
 from simulator.generate import GRAPH_KINDS, generate_scenario
 from simulator.polygon import polygon_area_centroid_moment
 from simulator.scenario import (
+    Agvs,
     Scenario,
     ScenarioError,
     load_scenario,
@@ -336,6 +339,20 @@ INVALID = [
     ),
     ("gain out of range", put("actuators.gains", [1, 1, 2, 1]), "actuators.gains[2]", "[0.5, 1.5]"),
     ("unknown actuator key", put("actuators.delay_s", 0.1), "actuators.delay_s", "unknown key"),
+    ("agv profile", put("agvs.profile", "torque"), "agvs.profile", "force, velocity"),
+    ("agv key", put("agvs.stiffness", 1000.0), "agvs.stiffness", "unknown key"),
+    (
+        "agv speed loop",
+        put("agvs.speed_time_constant_s", 0.0),
+        "agvs.speed_time_constant_s",
+        "[0.001, 1] s",
+    ),
+    ("agv accel", put("agvs.max_accel", 0.0), "agvs.max_accel", "(0, 100] m/s²"),
+    ("agv stiffness", put("agvs.contact_stiffness", 1.0), "agvs.contact_stiffness", "N/m"),
+    ("agv bias", put("agvs.sensor_bias_std", -0.1), "agvs.sensor_bias_std", "[0, 100] N"),
+    ("admittance", put("agvs.admittance.mass", 0.0), "agvs.admittance.mass", "[0.01, 1000] kg"),
+    ("admittance key", put("agvs.admittance.gain", 1.0), "agvs.admittance.gain", "unknown key"),
+    ("agvs not a table", put("agvs", 1), "agvs", "expected a table"),
 ]
 
 
@@ -372,6 +389,66 @@ def test_valid_variations_are_accepted() -> None:
     assert s.substeps == 5
     assert s.agent.paper.push_min_force == 2.0
     assert s.description == "variations"
+
+
+def velocity_agvs(data: dict[str, Any], **agvs: Any) -> dict[str, Any]:
+    data["agvs"] = {"profile": "velocity", **agvs}
+    return data
+
+
+def test_agvs_default_to_force_drives_and_a_force_profile_changes_nothing() -> None:
+    plain = parse_scenario(base())
+    assert plain.agvs == Agvs() and not plain.agvs.velocity
+    data = base()
+    data["agvs"] = {"profile": "force"}
+    assert parse_scenario(data) == plain
+    assert "[agvs]" not in scenario_to_toml(plain)
+
+
+def test_velocity_agvs_are_read_with_their_admittance_loop() -> None:
+    data = velocity_agvs(base(), contact_stiffness=8000.0, admittance={"mass": 4.0})
+    agvs = parse_scenario(data).agvs
+    assert agvs.velocity and agvs.contact_stiffness == 8000.0
+    assert agvs.admittance == AdmittanceSettings(mass=4.0)
+    assert agvs.speed_time_constant_s == 0.05 and agvs.sensor_bias_std == 0.3
+
+
+def test_velocity_agvs_refuse_force_drives() -> None:
+    data = velocity_agvs(base())
+    data["actuators"] = {"time_constant_s": 0.02}
+    with pytest.raises(ScenarioError, match=r"^base\.toml: actuators: models force drives"):
+        parse_scenario(data, source="base.toml")
+    data["agvs"]["profile"] = "force"
+    assert parse_scenario(data).actuators.time_constant_s == 0.02
+
+
+def test_the_physics_rate_must_resolve_the_contacts() -> None:
+    """The base scenario (2 kg, a 2 m square): λ = Σ (2/m + r²/J) = 4 + 4 · 1.25 / (4/3) = 7.75
+    per kg, so 10 000 N/m rings at √(77 500) = 278 rad/s: at least 557 Hz of physics."""
+    data = velocity_agvs(base(), contact_stiffness=10_000.0)
+    data["run"]["physics_hz"] = 600.0
+    assert parse_scenario(data).run.physics_hz == 600.0
+    data["run"]["physics_hz"] = 500.0
+    with pytest.raises(ScenarioError) as caught:
+        parse_scenario(data, source="base.toml")
+    assert str(caught.value) == (
+        "base.toml: run.physics_hz: expected at least 556.8 Hz for agvs.contact_stiffness ="
+        " 10000 N/m on this load, got 500.0"
+    )
+    data = velocity_agvs(base(), contact_damping=200.0)
+    with pytest.raises(ScenarioError, match="agvs.contact_damping = 200 N s/m"):
+        parse_scenario(data)
+
+
+def test_paper_velocity_is_paper_noisy_on_velocity_commanded_agvs() -> None:
+    noisy = load_scenario(PAPER.with_name("paper-noisy.toml"))
+    velocity = load_scenario(PAPER.with_name("paper-velocity.toml"))
+    assert velocity.agvs.velocity and velocity.actuators.ideal
+    assert velocity.agvs.admittance == AdmittanceSettings()
+    same = dataclasses.replace(
+        velocity, name=noisy.name, agvs=noisy.agvs, actuators=noisy.actuators
+    )
+    assert same == noisy
 
 
 # --------------------------------------------------------------------------------------------
@@ -440,6 +517,19 @@ def test_round_trip_of_every_option() -> None:
     s = parse_scenario(data)
     assert s.actuators.gains == (0.98, 1.02, 1.0, 1.01) and not s.actuators.ideal
     assert round_trip(s) == s
+
+
+def test_round_trip_of_velocity_agvs() -> None:
+    agvs = {"speed_time_constant_s": 0.1, "max_accel": 1.5, "max_speed": 2.0}
+    agvs |= {"contact_stiffness": 1e3, "contact_damping": 0.1 + 0.2, "sensor_bias_std": 0.0}
+    agvs["admittance"] = {"mass": 2.5, "damping": 10.0, "tare_samples": 7}
+    s = parse_scenario(velocity_agvs(base(), **agvs))
+    assert s.agvs.admittance.tare_samples == 7
+    assert round_trip(s) == s
+    assert round_trip(parse_scenario(velocity_agvs(base()))) == parse_scenario(
+        velocity_agvs(base())
+    )
+    assert round_trip(load_scenario(PAPER.with_name("paper-velocity.toml"))).agvs.velocity
 
 
 @pytest.mark.parametrize("seed", range(30))
