@@ -40,7 +40,10 @@ the admittance loop between them (:class:`~bridge.admittance.Admittance`). Tick 
    ZERO frames above: the agent silent for ``watchdog_s`` (the watchdog), and the sensor stale
    (no usable ``ForceTorque`` for ``watchdog_s`` after the bus opened a tick without one, once
    one has come), each logged once per trip with its reason and counted. The base drives again
-   once both are back.
+   once both are back. A contact force beyond the loop's ``max_contact_force`` is a third:
+   the loop commands standstill (a ``MotionCommand`` of zero velocity for that tick, so that a
+   lockstep bus master still gets its tick's command), counted as ``overload stops`` and
+   logged once per episode.
 
 :meth:`Bridge.status` gives the profile, the loop's force-tracking error and the stale sensor.
 
@@ -139,7 +142,8 @@ class Bridge:
         ``commands``, ``missed ticks``, ``repeats``, ``counter jumps``, ``lost frames``,
         ``clamped``, ``other nodes``, ``zero frames``, ``watchdog trips``, ``bus errors``,
         ``reopens``, ``send failed``; with the velocity profile also ``stop frames``,
-        ``sensor faults`` (samples with a status bit set) and ``sensor stale trips``;
+        ``sensor faults`` (samples with a status bit set), ``sensor stale trips`` and
+        ``overload stops`` (the admittance loop's protective stops);
         rejections are in ``rejects``."""
         self.tripped = False
         """Whether the watchdog commands zero force (standstill) now."""
@@ -156,6 +160,8 @@ class Bridge:
         self._zero_tick: int | None = None
         """The tick of the last ZERO (STOP) frame."""
         self._measured: tuple[int, Vec2] | None = None
+        self._overloaded = False
+        """Whether the last step was a protective stop (logged once per episode)."""
         """The newest tick given to the admittance loop, and its tared force."""
         self._stepped: tuple[int, can.Message] | None = None
         """The tick the loop last stepped for, and the frame it gave."""
@@ -339,12 +345,31 @@ class Bridge:
         velocity, too_fast = clamp_command_velocity(self.admittance.step(force))
         if clamped or too_fast:
             self.counts["clamped"] += 1
+        self._protect(tick)
         frame = self.codec.encode(
             MotionCommand(self.node, tick % COUNTER_MODULO, velocity, drive=True)
         )
         self._stepped = (tick, frame)
         self.counts["commands"] += 1
         return [frame]
+
+    def _protect(self, tick: int) -> None:
+        """Count and log the admittance loop's protective stops (a contact force beyond
+        ``max_contact_force``: the loop commands standstill), once per episode in the log."""
+        if not self.admittance.overloaded:
+            self._overloaded = False
+            return
+        self.counts["overload stops"] += 1
+        if not self._overloaded:
+            log.warning(
+                "robot %d: contact force %.1f N beyond max_contact_force %.0f N at tick %d:"
+                " commanding standstill",
+                self.robot,
+                math.hypot(*self._measured[1]),
+                self.admittance.settings.max_contact_force,
+                tick,
+            )
+        self._overloaded = True
 
     def watchdog(self, at: float) -> list[can.Message]:
         """Zero force (mode ZERO), or standstill (STOP) with the velocity profile, if the agent

@@ -98,8 +98,8 @@ def _add_bridge(commands: argparse._SubParsersAction) -> None:
             '  time_source = "sync"      # or "clock" (chrony/PTP-synchronised host clock)\n'
             '  profile = "force"         # or "velocity"\n'
             "  [can.admittance]          # velocity profile only (see docs/can-bridge.md)\n"
-            "  mass = 10.0               # kg, the virtual mass\n"
-            "  damping = 0.0             # N s/m\n\n"
+            "  mass = 100.0              # kg, the virtual mass\n"
+            "  damping = 1000.0          # N s/m\n\n"
             "example: heft bridge --config robot-1.toml --channel vcan1"
         ),
     )

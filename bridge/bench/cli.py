@@ -21,7 +21,7 @@ def register(benchmarks: argparse._SubParsersAction) -> None:
     """Add ``heft bench can`` (entry point of the group ``heft.bench``)."""
     parser = benchmarks.add_parser(
         "can",
-        help="one AGV bridge on vcan: round trip, forwarding rate or force tracking, CPU",
+        help="one AGV bridge on vcan: round trip, rate or force tracking, CPU",
         formatter_class=HelpFormatter,
         description=(
             "The AGV bridge's benchmark on a vcan interface (run it in heft vcan -- heft bench\n"

@@ -194,6 +194,7 @@ class Runaway:
     ``max_speed`` is at most 8 m/s)."""
 
     bias = (0.0, 0.0)
+    overloaded = False
 
     def measure(self, raw):
         return raw

@@ -574,7 +574,7 @@ def test_velocity_bases_on_can_in_lockstep_reproduce_the_inprocess_can_run() -> 
     for sample in published:
         assert estimates[sample.truth.tick] == sample.estimates
     assert port.rejects.total == 0 and port.counts["stop commands"] == 0
-    assert max(math.hypot(*t.com_velocity) for t in truths.values()) > 0.01  # it was pushed
+    assert max(math.hypot(*t.com_velocity) for t in truths.values()) > 0.003  # it moved
 
 
 def test_an_event_queue_is_shared_with_the_other_side(rig) -> None:
