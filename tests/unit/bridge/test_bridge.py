@@ -18,15 +18,19 @@ from agent.platform.protocol import BridgeStatus, Command, Measurement, decode, 
 from agent.platform.robot_io import AgentsPort
 from bridge.bridge import CAN_ERR_BUSOFF, Bridge
 from bridge.codec import (
+    REASONS,
     AgvCodec,
     AppliedForce,
     ForceCommand,
+    ForceTorque,
     Heartbeat,
+    MotionCommand,
+    MotionFeedback,
     Odometry,
     Sync,
 )
 from bridge.config import CanSettings, load_bridge_config
-from bridge.dbc import MAX_FORCE
+from bridge.dbc import MAX_FORCE, PROFILES
 from bridge.node import BridgeNode, open_bus
 from bridge.timing import EPOCH, ClockTicks, SyncTicks
 from tests.helpers.random_frames import random_frames
@@ -426,18 +430,35 @@ def test_a_bus_that_cannot_be_opened_is_one_line() -> None:
     assert "\n" not in str(caught.value)
 
 
+PROFILE_TICKS = {
+    "force": tick_frames,
+    "velocity": lambda tick: [
+        Sync(tick),
+        MotionFeedback(2, tick % 16, (0.5, -0.25)),
+        ForceTorque(2, tick % 16, (10.0, -3.0)),
+    ],
+}
+"""Each profile's frames of one tick from AGV node 2 (the velocity profile's: its base's and
+its force/torque sensor's)."""
+
+
+@pytest.mark.parametrize("profile", PROFILES)
 def test_100000_random_frames_are_counted_by_reason_while_the_valid_traffic_flows(
-    tmp_path,
+    tmp_path, profile: str
 ) -> None:
     """The bridge's loop on a virtual bus takes 100 000 frames it must refuse (random ids,
-    lengths, payloads, error and remote frames), in bursts between the driver's ticks: it
-    keeps running, turns every tick into a measurement and every command into a frame, and
-    its counters say exactly what was sent, reason by reason."""
+    lengths, payloads, error and remote frames, the other profile's frames), in bursts
+    between the driver's ticks: it keeps running, turns every tick into a measurement and
+    every command into a frame (the velocity profile's: the admittance loop's
+    ``MotionCommand``), and its counters say exactly what was sent, reason by reason."""
+    codec = AgvCodec(profile)
     path = tmp_path / "robot.toml"
-    path.write_text(ROBOT + '[can]\ninterface = "virtual"\nchannel = "t-random"\n', "utf-8")
+    table = f'[can]\ninterface = "virtual"\nchannel = "t-random"\nprofile = "{profile}"\n'
+    path.write_text(ROBOT + table, "utf-8")
     node = BridgeNode(load_bridge_config(path), RecordingPort())
     driver = can.Bus(interface="virtual", channel="t-random", receive_own_messages=False)
-    junk, reasons = random_frames(100_000, seed=8, codec=CODEC)
+    junk, reasons = random_frames(100_000, seed=8, codec=codec)
+    assert set(reasons) == set(REASONS)  # every reason drawn
     bus_off = sum(1 for m in junk if m.is_error_frame and m.arbitration_id & CAN_ERR_BUSOFF)
     node.open()
     runner = threading.Thread(target=node.run)
@@ -448,8 +469,8 @@ def test_100000_random_frames_are_counted_by_reason_while_the_valid_traffic_flow
         for tick in range(ticks):
             for message in junk[tick * 250 : (tick + 1) * 250]:
                 driver.send(message)
-            for frame in tick_frames(tick):
-                driver.send(CODEC.encode(frame))
+            for frame in PROFILE_TICKS[profile](tick):
+                driver.send(codec.encode(frame))
             for message in junk[(tick + ticks) * 250 : (tick + ticks + 1) * 250]:
                 driver.send(message)
             while len(node.port.sent) <= tick:  # the agent answers once it has the sample
@@ -460,10 +481,10 @@ def test_100000_random_frames_are_counted_by_reason_while_the_valid_traffic_flow
             assert time.monotonic() < deadline and runner.is_alive()
             time.sleep(0.05)
         answers = []  # the commands' frames (then the watchdog's, once commands stop)
-        while len([f for f in answers if f.apply]) < ticks:
+        while len([f for f in answers if driving(f)]) < ticks:
             message = driver.recv(2.0)
             assert message is not None, f"{len(answers)} frames back, then nothing"
-            answers.append(CODEC.decode(message))
+            answers.append(codec.decode(message))
     finally:
         node.stop.set()
         runner.join(10)
@@ -471,7 +492,7 @@ def test_100000_random_frames_are_counted_by_reason_while_the_valid_traffic_flow
         driver.shutdown()
     bridge = node.bridge
     assert [m.tick for m in node.port.sent] == list(range(ticks))
-    assert [f.counter for f in answers if f.apply] == [t % 16 for t in range(ticks)]
+    assert [f.counter for f in answers if driving(f)] == [t % 16 for t in range(ticks)]
     assert bridge.counts["frames in"] == len(junk) + 3 * ticks
     assert bridge.counts["bus errors"] == sum(1 for m in junk if m.is_error_frame)
     expected = {("can frame", why): n for why, n in reasons.items()}
@@ -479,4 +500,10 @@ def test_100000_random_frames_are_counted_by_reason_while_the_valid_traffic_flow
     expected["can frame", "bus off"] = bus_off
     assert dict(bridge.rejects.reasons) == {k: n for k, n in expected.items() if n}
     assert bridge.status().decode_errors == len(junk) - bus_off
+    assert bridge.status().profile == profile
     assert bridge.counts["missed ticks"] == 0 and bridge.counts["counter jumps"] == 0
+
+
+def driving(frame: ForceCommand | MotionCommand) -> bool:
+    """Whether the bridge's frame carries a command (not the watchdog's zero force or STOP)."""
+    return frame.apply if isinstance(frame, ForceCommand) else frame.drive

@@ -1,0 +1,261 @@
+"""Hardware-in-the-loop of the AGV protocol's velocity profile on real kernel CAN (vcan):
+velocity-commanded bases behind bridges that close the admittance loop. What is checked is the
+plumbing (frames, ticks, stops), not how well the loop tracks its force (``heft bench can
+--profile velocity`` measures that). Like tests/hil/test_hil.py, these need vcan (``make
+hil``)."""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from agent.platform.protocol import Command, Keys, encode
+from agent.platform.zenoh_session import tick_publisher
+from bridge.codec import (
+    AgvCodec,
+    AppliedForce,
+    ForceCommand,
+    ForceTorque,
+    MotionCommand,
+    MotionFeedback,
+    Odometry,
+    Sync,
+)
+from bridge.dbc import FORCE_TORQUE_BASE, MOTION_COMMAND_BASE, SENSOR_STATUS_BITS, SYNC_ID
+from tests.helpers.hil import (
+    PERIOD,
+    RIG_TEAM,
+    WATCHDOG_MS,
+    DriverRig,
+    decoded_kinds,
+    lockstep_over_vcan,
+)
+from tests.helpers.paths import ROOT
+
+pytestmark = [pytest.mark.hil, pytest.mark.usefixtures("vcan")]
+
+PAPER_VELOCITY = ROOT / "simulator" / "scenarios" / "paper-velocity.toml"
+RIG_CHANNEL = "vcan0"
+"""The spare interface: the force profile's rig and ``heft bench can`` use vcan8."""
+PUSH_N = 5.0
+"""N: the echo agent's pushes (``--push``)."""
+UNLOADED = (0.5, -0.25)
+"""N: the sensor's raw reading, its bias alone (nothing presses on it)."""
+FAULT = 1 << next(bit for bit, name in SENSOR_STATUS_BITS.items() if name == "FAULT")
+
+
+# ------------------------------------------------------------------------------ whole runs
+def test_lockstep_over_can_reproduces_the_inprocess_can_run_on_velocity_commanded_agvs(
+    tmp_path: Path,
+) -> None:
+    """``heft run paper-velocity.toml --can`` for :data:`~tests.helpers.hil.HIL_RUN_S`: every
+    robot's estimates equal the in-process ``link="can"`` run's to 1e-9, the bridges' counters
+    clean (:func:`~tests.helpers.hil.lockstep_over_vcan`), every bridge of the velocity
+    profile and never stopped (a stop forgets the admittance loop's state, which the run in one
+    process does not); robot 1's bus, logged in candump's format, decodes with cantools
+    against ``bridge/agv-velocity.dbc``, a frame of each kind per tick."""
+    log = tmp_path / "vcan1.log"
+    there = lockstep_over_vcan(PAPER_VELOCITY, log)
+    for status in there.transport["bridges"].values():
+        assert status["profile"] == "velocity"
+        assert status["watchdog_trips"] == 0 and status["sensor_stale_trips"] == 0
+    kinds = decoded_kinds(log, ROOT / "bridge/agv-velocity.dbc")
+    for kind in ("Sync", "MotionFeedback_1", "ForceTorque_1", "MotionCommand_1"):
+        assert kinds[kind] >= there.ticks, (kind, kinds)
+    assert kinds["Heartbeat_1"] > 0
+    assert not {"Odometry_1", "AppliedForce_1", "ForceCommand_1"} & set(kinds)
+
+
+# ------------------------------------------------------------------------------ one bridge
+def commands(frames: list, drive: bool) -> list[float]:
+    """The kernel timestamps of the bridge's ``MotionCommand`` frames among ``(timestamp,
+    frame)``: those in mode VELOCITY (``drive``) or STOP."""
+    return [t for t, f in frames if isinstance(f, MotionCommand) and f.drive == drive]
+
+
+def assert_stopped(frames: list, stops: list[float], delay_ms: float) -> None:
+    """The base is stopped: the first of the ``stops`` (the STOP frames' timestamps) came
+    ``delay_ms`` after what stops it, within the watchdog plus or minus one frame period, then
+    one a tick (at least 10 in the 300 ms the tests wait after the trip) and no MotionCommand
+    in mode VELOCITY among the ``frames``."""
+    assert WATCHDOG_MS - PERIOD * 1e3 <= delay_ms <= WATCHDOG_MS + PERIOD * 1e3
+    assert len(stops) >= 10
+    assert not commands([(t, f) for t, f in frames if t > stops[0]], drive=True)
+
+
+class VelocityRig(DriverRig):
+    """A :class:`~tests.helpers.hil.DriverRig` of the velocity profile on :data:`RIG_CHANNEL`,
+    its echo agent pushing :data:`PUSH_N` newtons: the driver's tick is ``Sync``, the base's
+    ``MotionFeedback`` and its force/torque sensor's ``ForceTorque`` (:attr:`sensor`:
+    ``"ok"``, ``"silent"``: no ``ForceTorque``, or ``"fault"``: its FAULT bit set); what is
+    read is ``Sync``, ``ForceTorque`` and the bridge's ``MotionCommand``."""
+
+    def __init__(self, folder: Path) -> None:
+        self.sensor = "ok"
+        listened = (SYNC_ID, FORCE_TORQUE_BASE + 1, MOTION_COMMAND_BASE + 1)
+        super().__init__(folder, RIG_CHANNEL, listened, profile="velocity", push_n=PUSH_N)
+
+    def tick_frames(self, k: int) -> list:
+        frames = [Sync(k), MotionFeedback(1, k % 16, (0.1, 0.2))]
+        if self.sensor != "silent":
+            status = FAULT if self.sensor == "fault" else 0
+            frames.append(ForceTorque(1, k % 16, UNLOADED, status))
+        return frames
+
+    def set_sensor(self, state: str) -> None:
+        with self.ticking:  # from the next tick on
+            self.sensor = state
+
+    @contextlib.contextmanager
+    def agent_heard(self):
+        """Meanwhile, commands for the bus's newest tick every period, as an agent's that
+        keeps answering (the bridge hears them, so its watchdog holds off, and refuses them:
+        that tick has no sample yet)."""
+        publisher = tick_publisher(self.rig.session, Keys(RIG_TEAM).force(1))
+        done = threading.Event()
+
+        def keep() -> None:
+            while not done.wait(PERIOD):
+                publisher.put(encode(Command(1, self.tick - 1, (0.0, 0.0))))
+
+        keeper = threading.Thread(target=keep, daemon=True)
+        keeper.start()
+        try:
+            yield
+        finally:
+            done.set()
+            keeper.join(5)
+            publisher.undeclare()
+
+    def drives_again(self, since: int) -> None:
+        """Wait until neither stop holds and the bridge's frames after ``frames[since]``
+        include a ``MotionCommand`` in mode VELOCITY."""
+        self.wait(lambda s: not s.watchdog and not s.sensor_stale, 30, "both stops clear")
+        deadline = time.monotonic() + 30
+        while not commands(self.frames[since:], drive=True):
+            self.rig.check()
+            assert time.monotonic() < deadline, "no MotionCommand in mode VELOCITY within 30 s"
+            time.sleep(0.02)
+
+    def bridge_log(self) -> str:
+        return self.rig.children["bridge"].log.read_text(errors="replace")
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory, vcan) -> VelocityRig:
+    rig = VelocityRig(tmp_path_factory.mktemp("velocity-rig"))
+    yield rig
+    rig.close()
+
+
+def test_the_other_profiles_frames_are_refused_and_counted(rig: VelocityRig) -> None:
+    """The force profile's frames for node 1 (Odometry, AppliedForce and ForceCommand, valid
+    ones) on the velocity bridge's bus, the driver paused: the bridge reads every one and
+    refuses every one, counted among its decode errors (``BridgeStatus`` has their total; the
+    reason, ``wrong profile``, is in its log)."""
+    rig.drives_again(0)
+    rig.paused.set()
+    with rig.ticking:  # the tick being sent is out
+        pass
+    before = rig.rig.settled_status(1 << 62, timeout_s=60.0)  # every frame so far read
+    force = AgvCodec("force")
+    junk = []
+    for k in range(20):
+        junk += [
+            force.encode(Odometry(1, k % 16, (0.1, 0.2))),
+            force.encode(AppliedForce(1, k % 16, (1.0, 2.0))),
+            force.encode(ForceCommand(1, k % 16, (1.0, 2.0))),
+        ]
+    for message in junk:
+        rig.send(message)
+    rig.heartbeat()  # valid: it dates the status that counts it
+    frames_in = before.frames_in + len(junk) + 1
+    after = rig.wait(lambda s: s.frames_in >= frames_in, 60, "the bridge reads the frames")
+    rig.paused.clear()
+    print(f"\n{len(junk)} force-profile frames: {before} -> {after}")
+    assert after.frames_in == frames_in
+    assert after.decode_errors - before.decode_errors == len(junk)
+    assert after.counter_jumps == before.counter_jumps and after.repeats == before.repeats
+    assert "(wrong profile): wrong profile: ForceCommand_1 is not a velocity frame" in (
+        rig.bridge_log()
+    )
+    rig.drives_again(len(rig.frames))
+
+
+def test_the_base_is_stopped_when_the_agent_is_killed(rig: VelocityRig) -> None:
+    """kill -9 the agent: the first MotionCommand in mode STOP follows the last one in mode
+    VELOCITY within the watchdog plus or minus one frame period, by the frames' kernel
+    timestamps, then one a tick; the base drives again once the agent is back."""
+    rig.drives_again(len(rig.frames))
+    deadline = time.monotonic() + 30  # the agent pushes: the loop commands a velocity
+    while not any(f.velocity != (0.0, 0.0) for _, f in rig.frames if isinstance(f, MotionCommand)):
+        assert time.monotonic() < deadline, "every MotionCommand at standstill for 30 s"
+        time.sleep(0.05)
+    before = rig.latest()
+    rig.frames.clear()
+    time.sleep(0.5)
+    rig.kill_agent()
+    tripped = rig.wait(lambda s: s.watchdog, 10, "the watchdog trips")
+    time.sleep(0.3)
+    frames = list(rig.frames)
+    last_drive = max(commands(frames, drive=True))
+    stops = [t for t in commands(frames, drive=False) if t > last_drive]
+    delay_ms = (stops[0] - last_drive) * 1e3
+    print(
+        f"\nagent killed: first STOP {delay_ms:.1f} ms after the last VELOCITY command"
+        f" (watchdog {WATCHDOG_MS} ms, period {PERIOD * 1e3:.0f} ms); {len(stops)} STOP frames"
+        f" in the next {(stops[-1] - stops[0]) * 1e3:.0f} ms"
+    )
+    # The watchdog starts when the bridge hears the command, before that command's frame is
+    # written: by the frames' timestamps the STOP can come up to one frame period early.
+    assert_stopped(frames, stops, delay_ms)
+    assert tripped.watchdog_trips == before.watchdog_trips + 1 and not tripped.sensor_stale
+    since = len(rig.frames)
+    rig.rig.start_agent()
+    rig.drives_again(since)
+
+
+@pytest.mark.parametrize("state", ["silent", "fault"])
+def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
+    rig: VelocityRig, state: str
+) -> None:
+    """The sensor falls silent (no ``ForceTorque``; ``Sync`` and ``MotionFeedback`` go on), or
+    reports FAULT: the first MotionCommand in mode STOP follows the first tick without a
+    usable sample by the watchdog plus or minus one frame period (so the last usable sample
+    by up to one period more), by kernel timestamps; the status says the sensor is stale and
+    counts the trip, the bridge's log says why; the base drives again once the sensor is back.
+
+    Without a sample there is no measurement, so the agent stops answering and its watchdog
+    would stop the base too, about as soon: here the agent's commands are played for the
+    bus's newest tick (:meth:`VelocityRig.agent_heard`) so that the sensor's stop is the one
+    measured (the agent's watchdog does not trip)."""
+    rig.drives_again(len(rig.frames))
+    before = rig.latest()
+    rig.frames.clear()
+    time.sleep(0.3)
+    with rig.agent_heard():
+        rig.set_sensor(state)
+        stale = rig.wait(lambda s: s.sensor_stale, 10, "the sensor is stale")
+        time.sleep(0.3)
+        frames = list(rig.frames)
+    since = len(rig.frames)
+    rig.set_sensor("ok")
+    last_sample = max(t for t, f in frames if isinstance(f, ForceTorque) and f.status == 0)
+    owed = min(t for t, f in frames if isinstance(f, Sync) and t > last_sample)
+    stops = [t for t in commands(frames, drive=False) if t > last_sample]
+    delay_ms = (stops[0] - owed) * 1e3
+    print(
+        f"\nsensor {state}: first STOP {delay_ms:.1f} ms after the first tick without a usable"
+        f" sample, {(stops[0] - last_sample) * 1e3:.1f} ms after the last one (watchdog"
+        f" {WATCHDOG_MS} ms, period {PERIOD * 1e3:.0f} ms); {len(stops)} STOP frames; {stale}"
+    )
+    assert_stopped(frames, stops, delay_ms)
+    assert stale.sensor_stale_trips == before.sensor_stale_trips + 1
+    assert stale.watchdog_trips == before.watchdog_trips and not stale.watchdog
+    why = "it reports FAULT" if state == "fault" else "no ForceTorque frame"
+    assert f"({why})" in rig.bridge_log()
+    rig.drives_again(since)
