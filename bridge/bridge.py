@@ -38,8 +38,8 @@ the admittance loop between them (:class:`~bridge.admittance.Admittance`). Tick 
    for a tick whose sample is not in, is refused and counted;
 3. two stops, each the loop's state forgotten and ``MotionCommand`` in mode STOP, paced as the
    ZERO frames above: the agent silent for ``watchdog_s`` (the watchdog), and the sensor stale
-   (no usable ``ForceTorque`` for ``watchdog_s`` after the bus opened a tick without one, once
-   one has come), each logged once per trip with its reason and counted. The base drives again
+   (no usable ``ForceTorque`` for ``watchdog_s`` since the last, once one has come, counted
+   from the bus opening a tick without one), each logged once per trip with its reason and counted. The base drives again
    once both are back. A contact force beyond the loop's ``max_contact_force`` is a third:
    the loop commands standstill (a ``MotionCommand`` of zero velocity for that tick, so that a
    lockstep bus master still gets its tick's command), counted as ``overload stops`` and
@@ -407,12 +407,14 @@ class Bridge:
 
     def _sensor_trips(self, at: float, latest: int | None) -> bool:
         """Whether the force/torque sensor goes stale now: no usable sample for
-        ``watchdog_s`` since the bus opened a tick without one (once one has come)."""
+        ``watchdog_s`` since its last one (once one has come). The bus opening a tick without
+        one starts the count, a period after the last sample: the stop comes ``watchdog_s``
+        after the last sample, not a period later."""
         if self._sensor_tick is None or latest is None or latest <= self._sensor_tick:
             return False
         if self._sensor_owed_since is None:
             self._sensor_owed_since = at
-        if self.sensor_stale or at - self._sensor_owed_since <= self.watchdog_s:
+        if self.sensor_stale or at - self._sensor_owed_since <= self._sensor_grace_s:
             return False
         self.sensor_stale = True
         self.counts["sensor stale trips"] += 1
@@ -424,10 +426,16 @@ class Bridge:
             self.robot,
             self._sensor_tick,
             why,
-            (at - self._sensor_owed_since) * 1e3,
+            (at - self._sensor_owed_since + self.period_s) * 1e3,
             self.watchdog_s * 1e3,
         )
         return True
+
+    @property
+    def _sensor_grace_s(self) -> float:
+        """How long after the bus opened a tick without a usable sample the sensor is stale:
+        ``watchdog_s`` from its last sample, a period before."""
+        return max(self.watchdog_s - self.period_s, 0.0)
 
     def halt(self, tick: int) -> can.Message:
         """The frame that stops the AGV, for ``tick``: ``ForceCommand`` in mode ZERO, or with
@@ -443,7 +451,7 @@ class Bridge:
         """When :meth:`watchdog` has something to do next (a time like ``at``)."""
         due = []
         if self._sensor_owed_since is not None and not self.sensor_stale:
-            due.append(max(at, self._sensor_owed_since + self.watchdog_s + 1e-4))
+            due.append(max(at, self._sensor_owed_since + self._sensor_grace_s + 1e-4))
         if self.tripped or self.sensor_stale:  # a new tick is a frame, and the loop checks
             due.append(max(at, self._last_zero_at + self.watchdog_s))  # after every frame
         elif self._last_command_at is None:

@@ -224,10 +224,10 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
     rig: VelocityRig, state: str
 ) -> None:
     """The sensor falls silent (no ``ForceTorque``; ``Sync`` and ``MotionFeedback`` go on), or
-    reports FAULT: the first MotionCommand in mode STOP follows the first tick without a
-    usable sample by the watchdog plus or minus one frame period (so the last usable sample
-    by up to one period more), by kernel timestamps; the status says the sensor is stale and
-    counts the trip, the bridge's log says why; the base drives again once the sensor is back.
+    reports FAULT: the first MotionCommand in mode STOP follows the last usable sample by the
+    watchdog plus or minus one frame period, by kernel timestamps; the status says the sensor
+    is stale and counts the trip, the bridge's log says why; the base drives again once the
+    sensor is back.
 
     Without a sample there is no measurement, so the agent stops answering and its watchdog
     would stop the base too, about as soon: here the agent's commands are played for the
@@ -247,10 +247,10 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
     last_sample = max(t for t, f in frames if isinstance(f, ForceTorque) and f.status == 0)
     owed = min(t for t, f in frames if isinstance(f, Sync) and t > last_sample)
     stops = [t for t in commands(frames, drive=False) if t > last_sample]
-    delay_ms = (stops[0] - owed) * 1e3
+    delay_ms = (stops[0] - last_sample) * 1e3
     print(
-        f"\nsensor {state}: first STOP {delay_ms:.1f} ms after the first tick without a usable"
-        f" sample, {(stops[0] - last_sample) * 1e3:.1f} ms after the last one (watchdog"
+        f"\nsensor {state}: first STOP {delay_ms:.1f} ms after the last usable sample,"
+        f" {(stops[0] - owed) * 1e3:.1f} ms after the first tick without one (watchdog"
         f" {WATCHDOG_MS} ms, period {PERIOD * 1e3:.0f} ms); {len(stops)} STOP frames; {stale}"
     )
     assert_stopped(frames, stops, delay_ms)

@@ -270,7 +270,9 @@ def test_a_stale_sensor_stops_the_base_within_the_watchdog_once_a_trip(caplog) -
     assert frames, "no stop"
     first_at, first = frames[0]
     assert first == MotionCommand(2, first.counter, (0.0, 0.0), drive=False)
-    assert 0.1 < first_at - 0.01 <= 0.1 + PERIOD + 1e-9  # within the watchdog of tick 5
+    # The last sample came with tick 4 (at 0.0), tick 5 opened without one at 0.01: the stop
+    # comes a watchdog after the last sample (this loop looks once a period).
+    assert 0.1 - 1e-9 <= first_at <= 0.1 + PERIOD + 1e-9
     assert all(not f.drive for _, f in frames)
     status = bridge.status()
     assert status.sensor_stale and status.sensor_stale_trips == 1 and not status.watchdog
@@ -316,7 +318,8 @@ def test_next_check_is_the_stale_sensors_deadline() -> None:
     feed(bridge, Sync(5))
     assert bridge.watchdog(5.0) == []
     due = bridge.next_check(5.0)
-    assert 5.1 < due < 5.101  # before the agent's (5.15)
+    assert 5.09 < due < 5.091  # a watchdog after the last sample, a period before tick 5
+    assert due < 5.15  # before the agent's
     assert len(bridge.watchdog(due)) == 1 and bridge.sensor_stale and not bridge.tripped
 
 
