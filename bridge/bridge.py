@@ -39,11 +39,11 @@ the admittance loop between them (:class:`~bridge.admittance.Admittance`). Tick 
 3. two stops, each the loop's state forgotten and ``MotionCommand`` in mode STOP, paced as the
    ZERO frames above: the agent silent for ``watchdog_s`` (the watchdog), and the sensor stale
    (no usable ``ForceTorque`` for ``watchdog_s`` since the last, once one has come, counted
-   from the bus opening a tick without one), each logged once per trip with its reason and counted. The base drives again
-   once both are back. A contact force beyond the loop's ``max_contact_force`` is a third:
-   the loop commands standstill (a ``MotionCommand`` of zero velocity for that tick, so that a
-   lockstep bus master still gets its tick's command), counted as ``overload stops`` and
-   logged once per episode.
+   from the bus opening a tick without one), each logged once per trip with its reason and
+   counted. The base drives again once both are back. A contact force beyond the loop's
+   ``max_contact_force`` is a third: the loop commands standstill (a ``MotionCommand`` of zero
+   velocity for that tick, so that a lockstep bus master still gets its tick's command),
+   counted as ``overload stops`` and logged once per episode.
 
 :meth:`Bridge.status` gives the profile, the loop's force-tracking error and the stale sensor.
 

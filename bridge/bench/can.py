@@ -623,6 +623,14 @@ def run_can_benchmark(settings: CanBenchSettings, say: Say = say_on_stderr) -> C
 
 
 # ------------------------------------------------------------------------------ the report
+GUEST_NOTE = [
+    "",
+    "(in User-Mode Linux the guest's one CPU runs the bridge, the router, the agent and",
+    " this process, and every system call costs about 100 us)",
+]
+"""The lines a report ends with when it was measured in User-Mode Linux."""
+
+
 def _ms(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f} ms"
 
@@ -690,9 +698,5 @@ def format_can_report(report: CanBenchReport) -> str:
             + (" (this process could not send faster)" if report.sender_limited else "")
         )
     if report.where != "natively":
-        lines += [
-            "",
-            "(in User-Mode Linux the guest's one CPU runs the bridge, the router, the echo agent",
-            " and this process, and every system call costs about 100 us)",
-        ]
+        lines += GUEST_NOTE
     return "\n".join(lines)

@@ -47,6 +47,7 @@ from bridge.bench.can import (
     DEFAULT_CHANNEL,
     DRIVER_MODE_ACTIVE,
     GOAL_P99_MS,
+    GUEST_NOTE,
     HEARTBEAT_S,
     NODE,
     BenchError,
@@ -393,9 +394,5 @@ def format_velocity_report(report: VelocityBenchReport) -> str:
         f" {_value(cpu.get('echo agent'), '%', 1)}, base {_value(cpu.get('driver'), '%', 1)})",
     ]
     if report.where != "natively":
-        lines += [
-            "",
-            "(in User-Mode Linux the guest's one CPU runs the bridge, the router, the agent and",
-            " this process, and every system call costs about 100 us)",
-        ]
+        lines += GUEST_NOTE
     return "\n".join(lines)
