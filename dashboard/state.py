@@ -576,8 +576,8 @@ class TeamState:
         return out
 
     def alarms(self, now: float) -> list[dict]:
-        """What an operator must see at once: a lost robot, a halt, a bridge's watchdog, a
-        silent team, rejected messages."""
+        """What an operator must see at once: a lost robot, a halt, a bridge's watchdog or stale
+        force/torque sensor, a silent team, rejected messages."""
         alarms = []
         over = self.done or self.stopped
         lost = self.lost()
@@ -591,13 +591,16 @@ class TeamState:
                 }
             )
         for i, view in sorted(self.robots.items()):
-            if view.bridge is not None and view.bridge.watchdog and not over:
-                alarms.append(
-                    {
-                        "level": "error",
-                        "text": f"robot {i}'s bridge watchdog: zero force (its agent fell silent)",
-                    }
-                )
+            bridge = view.bridge
+            if bridge is None or over:
+                continue
+            stop = "standstill" if bridge.profile == "velocity" else "zero force"
+            if bridge.watchdog:
+                text = f"robot {i}'s bridge watchdog: {stop} (its agent fell silent)"
+                alarms.append({"level": "error", "text": text})
+            if bridge.sensor_stale:
+                text = f"robot {i}'s force/torque sensor is stale: {stop}"
+                alarms.append({"level": "error", "text": text})
         if self.last_heard is not None and not over and now - self.last_heard > STALE_S:
             silent = now - self.last_heard
             text = f"no message from the team for {silent:.0f} s"

@@ -258,7 +258,13 @@ def test_alarms_lost_robot_halt_bridge_watchdog_and_silence() -> None:
     state.ingest(BridgeStatus(1, 6, watchdog=True), 1.0)
     texts = [a["text"] for a in state.alarms(now=1.0)]
     assert "robot(s) [3] lost" in texts
-    assert any("robot 1's bridge watchdog" in t for t in texts)
+    assert "robot 1's bridge watchdog: zero force (its agent fell silent)" in texts
+    assert not any("sensor" in t for t in texts)
+    velocity = BridgeStatus(2, 6, watchdog=True, profile="velocity", sensor_stale=True)
+    state.ingest(velocity, 1.0)
+    texts = [a["text"] for a in state.alarms(now=1.0)]
+    assert "robot 2's bridge watchdog: standstill (its agent fell silent)" in texts
+    assert "robot 2's force/torque sensor is stale: standstill" in texts
     state.ingest(Status(2, 7, Phase.HALTED, lost_neighbours=(3,)), 1.0)
     texts = [a["text"] for a in state.alarms(now=1.0)]
     assert any(t.startswith("team halted") for t in texts)
