@@ -287,7 +287,7 @@ class RunEnd:
             if because:
                 return Verdict(
                     CANNOT_BREAK_AWAY,
-                    f"{because}, at t = {tick * self.period_s:.2f} s simulated: the floor holds it",
+                    f"{because} (t = {tick * self.period_s:.2f} s simulated)",
                 )
             return Verdict(
                 CANNOT_BREAK_AWAY,

@@ -59,6 +59,12 @@ class OwnEstimates(Protocol):
         ...
 
     @property
+    def drive_share(self) -> float | None:
+        """How much of its commanded force this robot's drive applies, from the force its
+        sensor measures (``None``: not estimated)."""
+        ...
+
+    @property
     def moment(self) -> float | None:
         """``Ĵ`` (Step 4)."""
         ...

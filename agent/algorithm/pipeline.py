@@ -131,6 +131,12 @@ class EstimationPipeline:
         return self.consensus["mean_kick_level"]
 
     @property
+    def drive_share(self) -> float | None:
+        """How much of its command this robot's drive applies (``None``: the paper takes every
+        drive for ideal and does not estimate it)."""
+        return None
+
+    @property
     def moment(self) -> float | None:
         """``Ĵ`` (Step 4)."""
         return None if self.inertia is None else self.inertia.estimate

@@ -67,6 +67,10 @@ class DriveGain:
         """``(ĝ, its variance)`` for the lag whose residual is least (``None``: no fit yet)."""
         self.estimate = 1.0
         """``ĝ``: 1 (an ideal drive) until the fit has one."""
+        self.fitted: float | None = None
+        """The best lag's gain as fitted, at least 0 (a drive that applies nothing of its
+        command), ``None`` until there is a fit: what the drive does, where :attr:`estimate`
+        keeps 1 for a fit that is not positive."""
 
     def update(self, command: Vec2, measured: Vec2, dt: float) -> None:
         """The force ``measured`` at the end of a tick of length ``dt`` over which the drive
@@ -103,6 +107,7 @@ class DriveGain:
                 rss = 0.0
             if best is None or rss < least:
                 best, least, where = (gain, s_yy), rss, i
+        self.fitted = None if best is None else max(best[0], 0.0)
         if best is None or best[0] <= 0.0:
             self._fit, self.estimate = None, 1.0
         else:

@@ -118,6 +118,10 @@ left the COM with the orbit's speed, a drift that no friction takes out on a fri
 centre moves to the COM slowly enough that most of the drift goes with it (seeds 28, 32 and 33:
 within 2.8 m; seed 12 keeps 0.3 m/s and leaves its floor), and the brake is gone before the
 turn Step 1 measures (load 47, faded over 8 s: the verdict again)."""
+APPLIED_SHARE = 0.5
+"""A drive that applied less than this share of its commanded kick (:attr:`~agent.algorithm.
+interfaces.OwnEstimates.drive_share`) did not pass the force on: a load it did not move is not
+found held by the floor."""
 TURN_STOP_SHARE = 0.2
 """The brake stage before Step 7's translation stops the load's turn with the time constant
 ``TURN_STOP_SHARE × translate_brake_s`` (``e⁻⁵`` of it left by the end): the contacts' brake
@@ -179,7 +183,8 @@ class RobustPhases(PhaseMachine):
         """Ticks the kick has been at ``max_force`` with the load still."""
         self.held = False
         """Whether ``max_force``'s kick has not moved the load within ``breakaway_s``: the
-        floor holds it, and this robot pushes no more."""
+        floor holds it (or the drive does not pass the force on: :attr:`held_because`), and
+        this robot pushes no more."""
         self.spin_torque = 0.0
         """N m: ``τ_i``, this robot's torque ``z_i × f_i`` about the centroid in Step 1's
         spin-up, filtered over :data:`SPIN_TORQUE_TIME_CONSTANT_S`."""
@@ -214,7 +219,7 @@ class RobustPhases(PhaseMachine):
             )
             return force
         if k >= self.kick_ticks:
-            self._grow_kick()
+            self._grow_kick(own)
             still = self._still + 1
             self._still = still
             attempt, left = divmod(still, self.kick_ticks)
@@ -244,9 +249,11 @@ class RobustPhases(PhaseMachine):
         drive = self._turn_room(omega) if omega < PLAUSIBLE_TURNS * t.robust.max_turn_rate else 1.0
         return capped_spin_up_force(gain, t.spin_speed, edges, drive)
 
-    def _grow_kick(self) -> None:
+    def _grow_kick(self, own: OwnEstimates) -> None:
         """One tick of the load still after the kick's first ``kick_duration_s``: the kick
-        grows, up to ``max_force``, where ``breakaway_s`` of it finds the load held."""
+        grows, up to ``max_force``, where ``breakaway_s`` of it finds the load held: by the
+        floor, unless the robot's drive applied less than :data:`APPLIED_SHARE` of the kick
+        (its sensor's force against its command): then the force did not reach the load."""
         most = self.tuning.max_force
         if self.kick_level < most:
             self.kick_level = min(most, self.kick_level * self.kick_growth)
@@ -254,10 +261,19 @@ class RobustPhases(PhaseMachine):
         self._still_at_most += 1
         if self._still_at_most >= self.held_ticks:
             self.held = True
-            self.held_because = (
+            kick = (
                 f"Step 1's kick, grown to max_force = {most:g} N a robot, did not move the load"
                 f" within breakaway_s = {self.tuning.robust.breakaway_s:g} s"
             )
+            share = own.drive_share
+            if share is not None and share < APPLIED_SHARE:
+                self.held_because = (
+                    f"{kick}, but robot {self.robot}'s drive applied only {100 * share:.0f} % of"
+                    " it (its sensor's force against its command): the force did not reach the"
+                    " load"
+                )
+            else:
+                self.held_because = f"{kick}: the floor holds it"
 
     def _moving(self, own: OwnEstimates, velocity: Vec2) -> bool:
         """Whether the filtered contact velocity, or a filtered relative velocity, is faster
@@ -310,7 +326,7 @@ class RobustPhases(PhaseMachine):
                 f"the floor's friction torque met in Step 1, {friction:.3g} N m, asks more of"
                 f" Step 4 than max_force = {t.max_force:g} N a robot gives"
                 f" ({t.max_force * math.sqrt(w):.3g} N m, less than {LEAST_FRICTION_MARGIN:g}"
-                " times it)"
+                " times it): the floor holds it"
             )
             return t.max_force
         return min(t.inertia_force * _level(inertia), t.max_force)

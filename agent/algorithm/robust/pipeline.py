@@ -110,6 +110,12 @@ class RobustPipeline(EstimationPipeline):
         self.drive.update(command, measured, self.dt)
 
     @property
+    def drive_share(self) -> float | None:
+        """``ĝ``, this robot's drive gain, once its fit has one
+        (:class:`~agent.algorithm.robust.drive_gain.DriveGain`)."""
+        return self.drive.fitted
+
+    @property
     def mass(self) -> float | None:
         """``m̂``: the team's information-weighted mean of the robots' fits
         (:func:`~agent.algorithm.robust.team_mass.team_mass`), or this robot's own until that

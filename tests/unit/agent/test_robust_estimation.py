@@ -579,6 +579,19 @@ def test_drive_gain_through_a_lagging_drive(lag: float) -> None:
     assert drive.estimate == pytest.approx(1.03, rel=2e-3)
 
 
+@pytest.mark.parametrize("gain", [0.3, 0.0, -0.5])
+def test_what_a_drive_applies_is_known_even_where_the_gain_assumed_stays_1(gain: float) -> None:
+    """A drive that applies a third of its commands, none of them, or their opposite: the
+    fitted share says so (at least 0), where the estimate the team's mean takes stays 1 for a
+    fit that is not positive."""
+    drive = DriveGain()
+    assert drive.fitted is None
+    for command, measured in _drive(gain, 0.02, 300, 0.05):
+        drive.update(command, measured, DT)
+    assert drive.fitted == pytest.approx(max(gain, 0.0), abs=0.02)
+    assert drive.estimate == (pytest.approx(gain, abs=0.02) if gain > 0 else 1.0)
+
+
 def test_drive_gain_narrows_to_the_lags_near_its_best(monkeypatch) -> None:
     """After 2 s only the lags near the best run on, and the gain is the whole grid's."""
     rows = _drive(0.97, 0.02, 1500, 0.5, 3)
