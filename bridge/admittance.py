@@ -74,10 +74,12 @@ class AdmittanceSettings:
     mass: float = bounded(100.0, 0.01, 1000.0, "kg")
     """``M``: the virtual mass. Larger is steadier and slower."""
     damping: float = bounded(1000.0, 0.0, 10_000.0, "N s/m")
-    """``D``: the virtual damper. It damps the contact's resonance at the cost of a force error
-    ``D τ a`` while the load accelerates at ``a``."""
+    """``D``: the virtual damper. It damps the contact's resonance at the cost of a force error:
+    ``D v`` on a load moving at ``v`` without the integral, ``D τ_i a`` with it while the load
+    accelerates at ``a``."""
     integral_time_s: float = bounded(0.0, 0.0, 10.0, "s")
-    """``τ_i``: the base's speed-loop time constant (0: no integral, a plain admittance)."""
+    """``τ_i``: the integral's time constant, near the base's speed-loop time constant when
+    used; 0 (the default): none, a plain admittance."""
     deadzone_n: float = bounded(0.1, 0.0, 50.0, "N")
     """Force errors shorter than this are no error."""
     max_speed: float = bounded(1.5, 0.0, 8.0, "m/s", open_low=True)
