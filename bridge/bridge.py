@@ -490,4 +490,6 @@ class Bridge:
             force_error_p95=tracking.p95 if tracking else 0.0,
             sensor_stale=self.sensor_stale,
             sensor_stale_trips=c["sensor stale trips"],
+            overload_stops=c["overload stops"],
+            wrong_profile=self.rejects.reasons["can frame", "wrong profile"],
         )

@@ -601,6 +601,12 @@ class TeamState:
             if bridge.sensor_stale:
                 text = f"robot {i}'s force/torque sensor is stale: {stop}"
                 alarms.append({"level": "error", "text": text})
+            if bridge.overload_stops:
+                text = (
+                    f"robot {i}'s contact force went beyond max_contact_force:"
+                    f" {bridge.overload_stops} protective stop(s)"
+                )
+                alarms.append({"level": "warning", "text": text})
         if self.last_heard is not None and not over and now - self.last_heard > STALE_S:
             silent = now - self.last_heard
             text = f"no message from the team for {silent:.0f} s"

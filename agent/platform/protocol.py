@@ -363,7 +363,10 @@ class BridgeStatus:
     closes an admittance loop: ``force_error_rms`` and ``force_error_p95`` (N) are its
     force-tracking error ``‖f_cmd − f_meas‖`` over its last 100 steps, and ``sensor_stale``
     is true while the base stands still because the force/torque sensor fell silent or
-    reports a fault (``sensor_stale_trips`` times so far); all zero with ``force``."""
+    reports a fault (``sensor_stale_trips`` times so far), and ``overload_stops`` counts the
+    ticks the loop commanded standstill for a contact force beyond its limit; all zero with
+    ``force``. ``wrong_profile`` counts the frames of the other profile among the
+    ``decode_errors``."""
 
     robot: int
     tick: int
@@ -387,6 +390,8 @@ class BridgeStatus:
     force_error_p95: float = 0.0
     sensor_stale: bool = False
     sensor_stale_trips: int = 0
+    overload_stops: int = 0
+    wrong_profile: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -982,6 +987,8 @@ _BRIDGE_COUNTERS = (
     "bus_errors",
     "reopens",
     "sensor_stale_trips",
+    "overload_stops",
+    "wrong_profile",
 )
 
 

@@ -155,8 +155,8 @@ def rig(tmp_path_factory, vcan) -> VelocityRig:
 def test_the_other_profiles_frames_are_refused_and_counted(rig: VelocityRig) -> None:
     """The force profile's frames for node 1 (Odometry, AppliedForce and ForceCommand, valid
     ones) on the velocity bridge's bus, the driver paused: the bridge reads every one and
-    refuses every one, counted among its decode errors (``BridgeStatus`` has their total; the
-    reason, ``wrong profile``, is in its log)."""
+    refuses every one, counted among its decode errors and as ``wrong_profile``, and says
+    why in its log."""
     rig.drives_again(0)
     rig.paused.set()
     with rig.ticking:  # the tick being sent is out
@@ -179,6 +179,7 @@ def test_the_other_profiles_frames_are_refused_and_counted(rig: VelocityRig) -> 
     print(f"\n{len(junk)} force-profile frames: {before} -> {after}")
     assert after.frames_in == frames_in
     assert after.decode_errors - before.decode_errors == len(junk)
+    assert after.wrong_profile - before.wrong_profile == len(junk)
     assert after.counter_jumps == before.counter_jumps and after.repeats == before.repeats
     assert "(wrong profile): wrong profile: ForceCommand_1 is not a velocity frame" in (
         rig.bridge_log()

@@ -5,6 +5,7 @@ sensor) hold the base at standstill; its config and its loop on a virtual bus.""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -139,7 +140,26 @@ def test_the_other_profiles_frames_are_refused_and_our_own_commands_are_foreign(
     assert reasons["can frame", "wrong profile"] == 2
     assert reasons["can frame", "foreign"] == 1
     assert bridge.counts["other nodes"] == 1
-    assert bridge.status().decode_errors == 2
+    status = bridge.status()
+    assert status.decode_errors == 2 and status.wrong_profile == 2
+
+
+def test_a_contact_force_beyond_the_limit_commands_standstill_counted_and_logged(caplog) -> None:
+    bridge = make_bridge(dataclasses.replace(SETTINGS, max_contact_force=20.0))
+    tared(bridge)
+    caplog.set_level(logging.WARNING, logger="heft.bridge")
+    assert drive(bridge, 4, at=0.04).velocity != (0.0, 0.0)
+    stops = []
+    for tick in (5, 6):  # the contact carries 25 N
+        feed(bridge, *tick_frames(tick, f=(15.0, 20.0)))
+        (frame,) = sent(bridge.command(Command(2, tick, (10.0, 0.0)), at=tick * PERIOD))
+        stops.append(frame)
+    assert stops == [MotionCommand(2, tick % 16, (0.0, 0.0)) for tick in (5, 6)]
+    assert bridge.status().overload_stops == 2
+    logged = [r.getMessage() for r in caplog.records if "max_contact_force" in r.getMessage()]
+    assert len(logged) == 1 and "25.0 N" in logged[0]  # once per episode
+    assert drive(bridge, 7, at=0.07).velocity != (0.0, 0.0)  # 2 N again: it drives
+    assert bridge.status().overload_stops == 2
 
 
 # ------------------------------------------------------------------------- the loop

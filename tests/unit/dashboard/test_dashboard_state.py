@@ -260,11 +260,14 @@ def test_alarms_lost_robot_halt_bridge_watchdog_and_silence() -> None:
     assert "robot(s) [3] lost" in texts
     assert "robot 1's bridge watchdog: zero force (its agent fell silent)" in texts
     assert not any("sensor" in t for t in texts)
-    velocity = BridgeStatus(2, 6, watchdog=True, profile="velocity", sensor_stale=True)
+    velocity = BridgeStatus(
+        2, 6, watchdog=True, profile="velocity", sensor_stale=True, overload_stops=3
+    )
     state.ingest(velocity, 1.0)
     texts = [a["text"] for a in state.alarms(now=1.0)]
     assert "robot 2's bridge watchdog: standstill (its agent fell silent)" in texts
     assert "robot 2's force/torque sensor is stale: standstill" in texts
+    assert "robot 2's contact force went beyond max_contact_force: 3 protective stop(s)" in texts
     state.ingest(Status(2, 7, Phase.HALTED, lost_neighbours=(3,)), 1.0)
     texts = [a["text"] for a in state.alarms(now=1.0)]
     assert any(t.startswith("team halted") for t in texts)
