@@ -4,6 +4,7 @@ python-can's ``virtual`` bus. The same bridge on real vcan is in tests/hil/test_
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -379,27 +380,49 @@ class RecordingPort(AgentsPort):
         pass
 
 
-def test_the_bridge_loop_on_a_virtual_bus(tmp_path) -> None:
-    """Driver frames on a python-can virtual bus → measurements; commands → frames; the
-    watchdog's zero force once commands stop; zero force again when the bridge stops."""
+@contextlib.contextmanager
+def bridge_on_virtual_bus(tmp_path, table: str, channel: str):
+    """``heft bridge``'s loop for robot 2's ``robot.toml`` with the ``[can]`` ``table`` (on
+    the python-can virtual bus ``channel``), running in a thread: yields its port and the
+    driver's side of the bus. On leaving, the bridge stops (and must have); the bus stays open
+    for the frames it sent as it stopped (the caller shuts it)."""
     path = tmp_path / "robot.toml"
-    path.write_text(ROBOT + '[can]\ninterface = "virtual"\nchannel = "t-loop"\n', "utf-8")
+    path.write_text(ROBOT + table, "utf-8")
     config = load_bridge_config(path)
-    driver = can.Bus(interface="virtual", channel="t-loop")
+    driver = can.Bus(interface="virtual", channel=channel)
     port = RecordingPort()
     node = BridgeNode(config, port)
     node.open()
     runner = threading.Thread(target=node.run)
     runner.start()
     try:
+        yield port, driver
+    finally:
+        node.stop.set()
+        runner.join(5)
+        node._close_bus()
+    assert not runner.is_alive()
+
+
+def answer(port: RecordingPort, tick: int, force) -> None:
+    """The agent's command for ``tick``, once the bridge has published that tick's
+    measurement (within 2 s)."""
+    deadline = time.monotonic() + 2.0
+    while len(port.sent) <= tick and time.monotonic() < deadline:
+        time.sleep(0.001)
+    port.events.put((time.perf_counter(), Command(2, tick, force)))
+
+
+def test_the_bridge_loop_on_a_virtual_bus(tmp_path) -> None:
+    """Driver frames on a python-can virtual bus → measurements; commands → frames; the
+    watchdog's zero force once commands stop; zero force again when the bridge stops."""
+    table = '[can]\ninterface = "virtual"\nchannel = "t-loop"\n'
+    with bridge_on_virtual_bus(tmp_path, table, "t-loop") as (port, driver):
         seen: list = []
         for tick in range(30):
             for frame in tick_frames(tick):
                 driver.send(CODEC.encode(frame))
-            deadline = time.monotonic() + 2.0
-            while len(port.sent) <= tick and time.monotonic() < deadline:
-                time.sleep(0.001)
-            port.events.put((time.perf_counter(), Command(2, tick, (float(tick), 1.0))))
+            answer(port, tick, (float(tick), 1.0))
             while (message := driver.recv(0.5)) is not None:
                 seen.append(CODEC.decode(message))
                 if isinstance(seen[-1], ForceCommand):
@@ -412,11 +435,6 @@ def test_the_bridge_loop_on_a_virtual_bus(tmp_path) -> None:
         zero = driver.recv(1.0)  # nothing more from the agent: the watchdog (100 ms)
         assert zero is not None and CODEC.decode(zero).apply is False
         assert any(r.watchdog for r in port.reports if isinstance(r, BridgeStatus))
-    finally:
-        node.stop.set()
-        runner.join(5)
-        node._close_bus()
-    assert not runner.is_alive()
     last = None
     while (message := driver.recv(0.2)) is not None:
         last = CODEC.decode(message)

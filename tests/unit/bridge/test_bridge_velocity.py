@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import threading
-import time
 import tomllib
 
 import can
@@ -30,9 +28,13 @@ from bridge.codec import (
 )
 from bridge.config import CanSettings, can_table, load_bridge_config
 from bridge.dbc import MAX_COMMAND_SPEED, MAX_FORCE
-from bridge.node import BridgeNode
 from bridge.timing import SyncTicks
-from tests.unit.bridge.test_bridge import ROBOT, Clock, RecordingPort
+from tests.unit.bridge.test_bridge import (
+    ROBOT,
+    Clock,
+    answer,
+    bridge_on_virtual_bus,
+)
 
 CODEC = AgvCodec("velocity")
 LOG = logging.getLogger("test.bridge.velocity")
@@ -406,28 +408,16 @@ def test_a_bad_profile_or_admittance_is_one_line_naming_the_key(tmp_path, table,
 def test_the_velocity_bridge_loop_on_a_virtual_bus(tmp_path) -> None:
     """Base and sensor frames on a python-can virtual bus → tared measurements; commands →
     MotionCommands; STOP once commands stop; STOP again when the bridge stops."""
-    path = tmp_path / "robot.toml"
     table = (
         '[can]\ninterface = "virtual"\nchannel = "t-velocity"\nprofile = "velocity"\n'
         "[can.admittance]\ntare_samples = 4\n"
     )
-    path.write_text(ROBOT + table, "utf-8")
-    config = load_bridge_config(path)
-    base = can.Bus(interface="virtual", channel="t-velocity")
-    port = RecordingPort()
-    node = BridgeNode(config, port)
-    node.open()
-    runner = threading.Thread(target=node.run)
-    runner.start()
-    try:
+    with bridge_on_virtual_bus(tmp_path, table, "t-velocity") as (port, base):
         commands: list[MotionCommand] = []
         for tick in range(12):
             for frame in tick_frames(tick, f=(1.0, 0.0) if tick >= 4 else (0.0, 0.0)):
                 base.send(CODEC.encode(frame))
-            deadline = time.monotonic() + 2.0
-            while len(port.sent) <= tick and time.monotonic() < deadline:
-                time.sleep(0.001)
-            port.events.put((time.perf_counter(), Command(2, tick, (5.0, 0.0))))
+            answer(port, tick, (5.0, 0.0))
             message = base.recv(1.0)
             assert message is not None
             commands.append(CODEC.decode(message))
@@ -437,11 +427,6 @@ def test_the_velocity_bridge_loop_on_a_virtual_bus(tmp_path) -> None:
         assert commands[2].velocity == (0.0, 0.0) and commands[-1].velocity[0] > 0  # tared at 3
         stop = base.recv(1.0)  # nothing more from the agent: the watchdog (100 ms)
         assert stop is not None and CODEC.decode(stop).drive is False
-    finally:
-        node.stop.set()
-        runner.join(5)
-        node._close_bus()
-    assert not runner.is_alive()
     last = None
     while (message := base.recv(0.2)) is not None:
         last = CODEC.decode(message)
