@@ -16,14 +16,14 @@ and index that make the file seekable. :mod:`dashboard.replay` reads either kind
 
 from __future__ import annotations
 
-import json
 import threading
 import time
 from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
-from dashboard.channels import MESSAGE_KINDS, json_schema, record_bytes
+from dashboard.channels import MESSAGE_KINDS
+from dashboard.topics import Outgoing, Topics
 
 FLUSH_EVERY_S = 0.5
 """The longest a recorded message waits in memory before it is in the file."""
@@ -53,38 +53,42 @@ class Recorder:
             self._stream, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD
         )
         self._writer.start(profile="", library=LIBRARY)
-        self._schemas: dict[type, int] = {}
+        self.topics = Topics(team)
+        self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._flushed_at = time.monotonic()
         self._closed = False
         self._writer.add_metadata(TEAM_METADATA, {"team": team})
         self._stream.flush()
 
-    def _channel(self, key: str, kind: type) -> int:
-        channel = self._channels.get(key)
+    def _channel(self, out: Outgoing) -> int:
+        channel = self._channels.get(out.topic)
         if channel is None:
-            schema = self._schemas.get(kind)
+            schema = self._schemas.get(out.schema.name)
             if schema is None:
-                data = json.dumps(json_schema(kind)).encode()
-                schema = self._writer.register_schema(f"heft.{kind.__name__}", "jsonschema", data)
-                self._schemas[kind] = schema
-            channel = self._writer.register_channel(key, "json", schema)
-            self._channels[key] = channel
+                spec = out.schema
+                schema = self._writer.register_schema(spec.name, spec.encoding, spec.data)
+                self._schemas[spec.name] = schema
+            channel = self._writer.register_channel(out.topic, out.message_encoding, schema)
+            self._channels[out.topic] = channel
         return channel
 
-    def write(self, key: str, message: object, log_time_ns: int | None = None) -> None:
+    def write(self, key: str, message: object, received_ns: int | None = None) -> None:
         """Record ``message`` (a decoded protocol message) as received on ``key`` at
-        ``log_time_ns`` (ns since the epoch; now by default)."""
+        ``received_ns`` (ns since the epoch; now by default), with what Foxglove draws of it
+        (:class:`~dashboard.topics.Topics`)."""
         if type(message) not in MESSAGE_KINDS:
             raise TypeError(f"not a protocol message: {type(message).__name__}")
-        stamp = time.time_ns() if log_time_ns is None else log_time_ns
-        data = record_bytes(message)
+        received = time.time_ns() if received_ns is None else received_ns
         with self._lock:
             if self._closed:
                 return
-            channel = self._channel(key, type(message))
-            self._writer.add_message(channel, log_time=stamp, data=data, publish_time=stamp)
-            self.messages += 1
+            for out in self.topics.of(key, message, received):
+                channel = self._channel(out)
+                self._writer.add_message(
+                    channel, log_time=out.log_time_ns, data=out.data, publish_time=received
+                )
+                self.messages += 1
             if time.monotonic() - self._flushed_at >= self.flush_every_s:
                 self._flush()
 
