@@ -22,7 +22,7 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
-from dashboard.channels import MESSAGE_KINDS
+from dashboard.channels import MESSAGE_KINDS, RECORD_FORMAT
 from dashboard.topics import Outgoing, Topics
 
 FLUSH_EVERY_S = 0.5
@@ -58,7 +58,7 @@ class Recorder:
         self._channels: dict[str, int] = {}
         self._flushed_at = time.monotonic()
         self._closed = False
-        self._writer.add_metadata(TEAM_METADATA, {"team": team})
+        self._writer.add_metadata(TEAM_METADATA, {"team": team, "format": RECORD_FORMAT})
         self._stream.flush()
 
     def _channel(self, out: Outgoing) -> int:

@@ -20,7 +20,7 @@ from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from agent.platform.protocol import DecodeError, Keys
-from dashboard.channels import from_record, kind_of
+from dashboard.channels import RECORD_FORMATS, from_record, kind_of
 from dashboard.recorder import TEAM_METADATA
 
 RECORD_LIMIT = 64 * 2**20
@@ -44,13 +44,15 @@ class Recorded:
 class Recording:
     """A recording, read once, front to back (iterate :meth:`messages`).
 
-    :attr:`team` is known once the first message has been read (the metadata comes first);
-    :attr:`cut` says why reading stopped before the file's end (None if
+    :attr:`team` and :attr:`record_format` (:data:`~dashboard.channels.RECORD_FORMATS`: ``1``
+    when the metadata names none) are known once the first message has been read (the metadata
+    comes first); :attr:`cut` says why reading stopped before the file's end (None if
     it did not), :attr:`rejected` counts the messages dropped, by what and why."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
         self.team: str | None = None
+        self.record_format = "1"
         self.cut: str | None = None
         self.read_count = 0
         self.rejected: Counter[tuple[str, str]] = Counter()
@@ -118,7 +120,13 @@ class Recording:
                 keys = Keys(str(record.metadata.get("team", "")))
             except ValueError as err:
                 raise RecordingError(f"{self.path}: {TEAM_METADATA}: {err}") from None
-            self.team = keys.team
+            record_format = str(record.metadata.get("format", "1"))
+            if record_format not in RECORD_FORMATS:
+                raise RecordingError(
+                    f"{self.path}: record format {record_format!r}, this program reads"
+                    f" {', '.join(RECORD_FORMATS)}"
+                )
+            self.team, self.record_format = keys.team, record_format
             return keys
         return None
 
@@ -128,7 +136,7 @@ class Recording:
             self.rejected["message", "not a channel of the team"] += 1
             return None
         try:
-            message = from_record(kind, record.data)
+            message = from_record(kind, record.data, self.record_format)
         except DecodeError:
             self.rejected[kind.__name__, "invalid"] += 1
             return None
