@@ -4,7 +4,8 @@
 A recording is read front to back as a stream, a chunk at a time, so that memory does not grow
 with its length, and a file cut short (its recorder killed) is read up to the cut. Every
 message goes through the protocol's checks again (:func:`dashboard.channels.from_record`):
-what fails is counted and dropped, as on the network.
+what fails is counted and dropped, as on the network. What Foxglove draws of them (the channels
+of ``foxglove.*`` schemas: :mod:`dashboard.scene`) is derived from them and skipped.
 """
 
 from __future__ import annotations
@@ -94,18 +95,25 @@ class Recording:
         decoded), in the order recorded."""
         schemas: dict[int, str] = {}
         channels: dict[int, tuple[str, type | None]] = {}
+        drawn: set[int] = set()  # what Foxglove draws of the messages (dashboard/scene.py)
         keys: Keys | None = None
         for record in self._records():
             if isinstance(record, Metadata):
                 keys = self._metadata(record) or keys
             elif isinstance(record, Schema):
                 schemas[record.id] = record.name
+            elif isinstance(record, Channel) and schemas.get(record.schema_id, "").startswith(
+                "foxglove."
+            ):
+                drawn.add(record.id)
             elif isinstance(record, Channel):
                 kind = None if keys is None else kind_of(keys, record.topic)
                 if kind is not None and schemas.get(record.schema_id) != f"heft.{kind.__name__}":
                     kind = None
                 channels[record.id] = (record.topic, kind)
             elif isinstance(record, Message):
+                if record.channel_id in drawn:
+                    continue
                 if kinds is not None:
                     kind = channels.get(record.channel_id, (None, None))[1]
                     if kind is not None and kind not in kinds:

@@ -16,6 +16,7 @@ import json
 from dataclasses import dataclass
 
 from dashboard.channels import json_schema, record_bytes
+from dashboard.scene import Scene
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +45,7 @@ class Topics:
 
     def __init__(self, team: str):
         self.team = team
+        self.scene = Scene(team)
         self._schemas: dict[type, SchemaSpec] = {}
 
     def schema(self, kind: type) -> SchemaSpec:
@@ -54,8 +56,25 @@ class Topics:
             spec = self._schemas[kind] = SchemaSpec(f"heft.{kind.__name__}", "jsonschema", data)
         return spec
 
+    def drawing_schema(self, kind: type) -> SchemaSpec:
+        """The schema of Foxglove SDK message class ``kind`` (``foxglove.SceneUpdate``…)."""
+        spec = self._schemas.get(kind)
+        if spec is None:
+            schema = kind.get_schema()
+            spec = SchemaSpec(schema.name, schema.encoding, bytes(schema.data))
+            self._schemas[kind] = spec
+        return spec
+
     def of(self, key: str, message: object, received_ns: int) -> list[Outgoing]:
         """What ``message``, received on ``key`` at ``received_ns`` (ns since the epoch),
-        puts on the topics."""
+        puts on the topics: its record, then what Foxglove draws of it
+        (:class:`~dashboard.scene.Scene`), at the same instant."""
         data = record_bytes(message)
-        return [Outgoing(key, self.schema(type(message)), "json", data, received_ns)]
+        record = Outgoing(key, self.schema(type(message)), "json", data, received_ns)
+        return [record, *self._drawn(message, record.log_time_ns)]
+
+    def _drawn(self, message: object, log_time_ns: int) -> list[Outgoing]:
+        return [
+            Outgoing(topic, self.drawing_schema(type(m)), "protobuf", m.encode(), log_time_ns)
+            for topic, m in self.scene.of(message, log_time_ns)
+        ]

@@ -35,7 +35,8 @@ def test_a_replayed_recording_gives_the_runs_final_table(tmp_path: Path, paper_r
     scenario, outcome = paper_run
     path = tmp_path / "paper.mcap"
     record_run(path, scenario, outcome)
-    # The file is a proper MCAP file with a summary and JSON-schema channels.
+    # The file is a proper MCAP file with a summary, JSON-schema channels of the messages and
+    # protobuf ones of what Foxglove draws of them (which the replay skips).
     with open(path, "rb") as stream:
         reader = make_reader(stream)
         summary = reader.get_summary()
@@ -46,8 +47,14 @@ def test_a_replayed_recording_gives_the_runs_final_table(tmp_path: Path, paper_r
             "heft.Truth": "jsonschema",
             "heft.Estimates": "jsonschema",
             "heft.Command": "jsonschema",
+            "foxglove.FrameTransform": "protobuf",
+            "foxglove.SceneUpdate": "protobuf",
+            "foxglove.Log": "protobuf",
         }
-        assert {c.message_encoding for c in summary.channels.values()} == {"json"}
+        encodings = {c.topic: c.message_encoding for c in summary.channels.values()}
+        drawn = {"heft/paper/transforms", "heft/paper/scene", "heft/paper/log"}
+        assert {encodings.pop(topic) for topic in drawn} == {"protobuf"}
+        assert set(encodings.values()) == {"json"}
     direct = TeamState("paper", scenario.load_geometry())
     for sample in [*outcome.history, outcome.final]:
         direct.ingest(sample.truth, 0.0)
