@@ -54,6 +54,7 @@ from agent.platform.config import (
     read_toml,
 )
 from agent.platform.faults import FaultSettings, FaultyTransport
+from agent.platform.log_lines import LogLines
 from agent.platform.process import RejectLog, StopSignals
 from agent.platform.protocol import (
     CLOCKS,
@@ -373,18 +374,32 @@ class AgentNode:
             self.last_sent, self.resent = time.monotonic(), True
 
     def run(self) -> int:
-        """Run until told to stop; returns the process exit status."""
-        log.info(
-            "robot %d: up (team %s, neighbours %s, %s clock)",
-            self.robot,
-            self.config.team,
-            list(self.config.neighbours),
-            self.config.clock,
-        )
-        while not self.stop.is_set():
-            self.pump(IDLE_WAIT_S)
-        self.port.report(self.status(self.next_tick - 1))
+        """Run until told to stop; returns the process exit status. What the loop logs at
+        INFO and above goes to the team too, as :class:`~agent.platform.protocol.LogLine`\\ s
+        (:mod:`agent.platform.log_lines`: a few a second at most)."""
+        lines = LogLines(self.robot, lambda: self.next_tick - 1)
+        root = logging.getLogger()
+        root.addHandler(lines)
+        try:
+            log.info(
+                "robot %d: up (team %s, neighbours %s, %s clock)",
+                self.robot,
+                self.config.team,
+                list(self.config.neighbours),
+                self.config.clock,
+            )
+            while not self.stop.is_set():
+                self.pump(IDLE_WAIT_S)
+                self._publish(lines)
+            self.port.report(self.status(self.next_tick - 1))
+        finally:
+            root.removeHandler(lines)
+        self._publish(lines)
         return 3 if self.agent.phase == Phase.HALTED else 0
+
+    def _publish(self, lines: LogLines) -> None:
+        for line in lines.take():
+            self.port.report(line)
 
 
 @contextmanager

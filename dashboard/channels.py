@@ -46,6 +46,7 @@ from agent.platform.protocol import (
     Estimates,
     Keys,
     LoadGeometry,
+    LogLine,
     Measurement,
     PlantStatus,
     Share,
@@ -62,6 +63,7 @@ ROBOT_KINDS: dict[type, Callable[[Keys, int], str]] = {
     Estimates: Keys.estimate,
     Status: Keys.status,
     BridgeStatus: Keys.bridge,
+    LogLine: Keys.log,
 }
 """The per-robot message classes and the :class:`Keys` method of each one's key."""
 TEAM_KINDS: dict[type, Callable[[Keys], str]] = {

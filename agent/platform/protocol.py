@@ -12,6 +12,7 @@ Every message that crosses a process or a machine is defined here, and nowhere e
   simulated plant's tick, its ground truth (evaluation only: no agent subscribes to it), the
   load's outline and the graph (for displays) and its counters,
 - :class:`BridgeStatus` — an AGV bridge's health,
+- :class:`LogLine` — a line of an agent's own log (agent → displays),
 - :class:`Control` — what the launcher tells every process of a team (stop).
 
 All vectors are planar, ``(x, y)`` tuples in SI units, in the common world frame ``W`` of the
@@ -30,6 +31,7 @@ import dataclasses as _dataclasses
 import functools as _functools
 import json as _json
 import math as _math
+import re as _re
 import struct as _struct
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -401,12 +403,42 @@ class Control:
     command: str = "stop"
 
 
+@dataclass(frozen=True, slots=True)
+class LogLine:
+    """A line of robot ``robot``'s agent's own log, at ``level`` (:data:`LOG_LEVELS`: ``info``
+    and above), logged while ``tick`` was its latest step (``-1`` before its first). ``text``
+    is at most :data:`MAX_LOG_TEXT` characters without control characters but tab and newline
+    (:func:`log_text` makes any text so). An agent publishes at most a few a second
+    (:mod:`agent.platform.log_lines`)."""
+
+    robot: int
+    tick: int
+    level: str
+    text: str
+
+
 CONTROL_COMMANDS = ("stop",)
 CLOCKS = ("lockstep", "realtime")
 """How the plant and the agents keep time (see :mod:`agent.node` and :mod:`simulator.node`)."""
 AGV_PROFILES = ("force", "velocity")
 """The AGV protocol's profiles a bridge speaks (``bridge.dbc.PROFILES``): a driver that takes
 force commands, or a velocity-commanded base with a force/torque sensor."""
+LOG_LEVELS = ("info", "warning", "error", "critical")
+"""The levels of a :class:`LogLine`: Python's ``logging`` levels from INFO up, by name."""
+MAX_LOG_TEXT = 1000
+"""Characters of a :class:`LogLine`'s text."""
+_NOT_LOG_TEXT = _re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\ud800-\udfff]")
+"""What a log line's text may not hold: control characters (but tab and newline), and lone
+surrogates (no UTF-8 for them)."""
+
+
+def log_text(text: str) -> str:
+    """``text`` as a :class:`LogLine` may carry it: each character it may not hold replaced by
+    ``?``, cut to :data:`MAX_LOG_TEXT` characters (the last one ``…`` if it was cut)."""
+    text = _NOT_LOG_TEXT.sub("?", text)
+    if len(text) > MAX_LOG_TEXT:
+        text = text[: MAX_LOG_TEXT - 1] + "…"
+    return text
 
 
 # ====================================================================== key expressions
@@ -422,6 +454,7 @@ class Keys:
     ``heft/<team>/robot/<id>/estimate``   Estimates        agent → launcher, displays
     ``heft/<team>/robot/<id>/status``     Status           agent → launcher, displays
     ``heft/<team>/robot/<id>/bridge``     BridgeStatus     AGV bridge → launcher, displays
+    ``heft/<team>/robot/<id>/log``        LogLine          agent → displays, recorders
     ``heft/<team>/robot/<id>/alive``      (liveliness)     agent
     ``heft/<team>/robot/<id>/bridge/alive`` (liveliness)   AGV bridge
     ``heft/<team>/plant/clock``           Clock            plant → everyone
@@ -464,6 +497,9 @@ class Keys:
     def bridge(self, robot: int) -> str:
         return self._robot(robot, "bridge")
 
+    def log(self, robot: int) -> str:
+        return self._robot(robot, "log")
+
     def alive(self, robot: int) -> str:
         return self._robot(robot, "alive")
 
@@ -481,6 +517,9 @@ class Keys:
 
     def all_bridges(self) -> str:
         return f"{self.root}/robot/*/bridge"
+
+    def all_logs(self) -> str:
+        return f"{self.root}/robot/*/log"
 
     def all_alive(self) -> str:
         return f"{self.root}/robot/*/alive"
@@ -514,6 +553,8 @@ class Keys:
             return self.status(message.robot)
         if isinstance(message, BridgeStatus):
             return self.bridge(message.robot)
+        if isinstance(message, LogLine):
+            return self.log(message.robot)
         if isinstance(message, Clock):
             return self.clock()
         if isinstance(message, Truth):
@@ -602,6 +643,7 @@ KINDS: dict[type, int] = {
     PlantStatus: 9,
     BridgeStatus: 10,
     LoadGeometry: 11,
+    LogLine: 12,
 }
 """Every message class and its kind byte."""
 
@@ -992,6 +1034,18 @@ _BRIDGE_COUNTERS = (
 )
 
 
+def _log_line(m: LogLine) -> None:
+    _robot_id("log_line.robot", m.robot)
+    _within("log_line.tick", m.tick, -1, MAX_TICK)
+    if m.level not in LOG_LEVELS:
+        raise DecodeError(f"log_line.level {m.level!r} is not one of {LOG_LEVELS}")
+    if len(m.text) > MAX_LOG_TEXT:
+        raise DecodeError(f"log_line.text: {len(m.text)} characters, at most {MAX_LOG_TEXT}")
+    bad = _NOT_LOG_TEXT.search(m.text)
+    if bad is not None:
+        raise DecodeError(f"log_line.text: character {bad.group()!r} at {bad.start()}")
+
+
 def _control(m: Control) -> None:
     if m.command not in CONTROL_COMMANDS:
         raise DecodeError(f"control.command {m.command!r} is not one of {CONTROL_COMMANDS}")
@@ -1107,6 +1161,7 @@ DOMAINS = {
     LoadGeometry: _load_geometry,
     BridgeStatus: _bridge_status,
     Control: _control,
+    LogLine: _log_line,
 }
 """Each message class's domain check: raises :class:`DecodeError` naming the field."""
 

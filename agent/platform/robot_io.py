@@ -9,10 +9,10 @@ back-ends — as python-can puts every bus behind ``BusABC``, with a virtual one
 - :class:`AgentsPort`, a robot's side (the simulated plant's, for all ``n`` robots, or one AGV
   bridge's, for its robot): commands in, measurements out, plus the liveliness of the agents.
 
-Both ``report`` telemetry for displays (estimates, status, truth, the plant's counters) and
-``poll`` for what arrived: each event is ``(arrival time, item)`` with ``item`` a decoded,
-checked protocol message or a :class:`Liveliness` change. What cannot be decoded, or arrives
-for a robot the port does not serve, is counted in the port's
+Both ``report`` telemetry for displays (estimates, status, log lines, truth, the plant's
+counters) and ``poll`` for what arrived: each event is ``(arrival time, item)`` with ``item`` a
+decoded, checked protocol message or a :class:`Liveliness` change. What cannot be decoded, or
+arrives for a robot the port does not serve, is counted in the port's
 :class:`~agent.platform.process.RejectLog` and never returned.
 
 Back-ends: :class:`InMemoryRobots` (one process: tests and in-process nodes) here, and
@@ -36,13 +36,14 @@ from agent.platform.protocol import (
     Control,
     Estimates,
     LoadGeometry,
+    LogLine,
     Measurement,
     PlantStatus,
     Status,
     Truth,
 )
 
-AgentReport = Estimates | Status
+AgentReport = Estimates | Status | LogLine
 RobotReport = Clock | Truth | LoadGeometry | PlantStatus | BridgeStatus
 
 

@@ -10,7 +10,8 @@ its processes do (keys from :class:`agent.platform.protocol.Keys`):
 identity     publishes                          subscribes to                     liveliness
 ============ ================================== ================================= ===========
 ``robot-i``  its robot's velocity, force,       its velocity and force, its       declares its
-             share, estimate, status, bridge    neighbours' shares, control       agent's and
+             share, estimate, status, log,      neighbours' shares, control       agent's and
+             bridge
                                                                                   bridge's;
                                                                                   watches its
                                                                                   own agent's
@@ -154,6 +155,7 @@ def team_grants(team: str, robots: int, edges: Sequence[tuple[int, int]]) -> dic
                 keys.share(i),
                 keys.estimate(i),
                 keys.status(i),
+                keys.log(i),
                 keys.bridge(i),
             ),
             # the agent hears its robot's velocity, the bridge its agent's force

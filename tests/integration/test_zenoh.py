@@ -18,7 +18,7 @@ import pytest
 from agent.node import AgentNodeConfig, zenoh_agent_node
 from agent.platform.children import free_port
 from agent.platform.faults import FaultSettings
-from agent.platform.protocol import Keys, Measurement, Share, encode
+from agent.platform.protocol import Keys, LogLine, Measurement, Share, decode, encode
 from agent.platform.zenoh_session import ZenohSettings, open_session
 from simulator.generate import generate_scenario
 from simulator.inprocess import run_inprocess
@@ -88,7 +88,8 @@ def router():
 
 
 def test_an_agent_hears_nothing_from_robots_that_are_not_its_neighbours(router: str) -> None:
-    """Robot 1's neighbour is robot 2 only; robot 3 publishes on the same network."""
+    """Robot 1's neighbour is robot 2 only; robot 3 publishes on the same network. What it
+    rejects it logs, and the team hears it as log lines on its log key."""
     keys = Keys("isolation")
     settings = ZenohSettings(mode="client", connect=(router,))
     config = AgentNodeConfig(
@@ -99,6 +100,10 @@ def test_an_agent_hears_nothing_from_robots_that_are_not_its_neighbours(router: 
         open_session(settings) as others,
         zenoh_agent_node(config, agent_session) as node,
     ):
+        lines: list[LogLine] = []
+        log = others.declare_subscriber(
+            keys.log(1), lambda s: lines.append(decode(LogLine, s.payload.to_bytes()))
+        )
         thread = threading.Thread(target=node.run, daemon=True)
         thread.start()
         try:
@@ -122,12 +127,19 @@ def test_an_agent_hears_nothing_from_robots_that_are_not_its_neighbours(router: 
         finally:
             node.stop.set()
             thread.join(timeout=5)
+            log.undeclare()
         assert node.next_tick == 5  # it kept stepping through the garbage
         # The undecodable share and the spoofed sender; none of robot 3's own 20 shares.
         assert node.port.rejects.counts["share"] == 2
         # The truncated measurement and robot 2's measurement on robot 1's key.
         assert node.port.rejects.counts["measurement"] == 2
         assert node.agent.rejected == 0
+        rejected = [line for line in lines if "rejected" in line.text]
+        assert [line.level for line in rejected] == ["warning"] * 4, lines
+        assert {line.text.split(" #")[0] for line in rejected} == {
+            "robot 1: rejected share",
+            "robot 1: rejected measurement",
+        }
 
 
 def test_interrupt_stops_every_process(tmp_path: Path) -> None:

@@ -17,6 +17,8 @@ from agent.platform.protocol import (
     AGV_PROFILES,
     DOMAINS,
     KINDS,
+    LOG_LEVELS,
+    MAX_LOG_TEXT,
     WIRE_VERSION,
     Barrier,
     BridgeStatus,
@@ -27,6 +29,7 @@ from agent.platform.protocol import (
     Estimates,
     Keys,
     LoadGeometry,
+    LogLine,
     Measurement,
     Phase,
     PlantStatus,
@@ -35,11 +38,12 @@ from agent.platform.protocol import (
     Truth,
     decode,
     encode,
+    log_text,
 )
 from agent.platform.team import ConsensusState, flow_width
 
 STRUCT_KINDS = (Measurement, Command, Share, Clock, Estimates)
-JSON_CLASSES = (Status, Truth, Control, PlantStatus, BridgeStatus, LoadGeometry)
+JSON_CLASSES = (Status, Truth, Control, PlantStatus, BridgeStatus, LoadGeometry, LogLine)
 ALL_KINDS = (*STRUCT_KINDS, *JSON_CLASSES)
 KIND_BYTE = {
     Measurement: 1,
@@ -53,6 +57,7 @@ KIND_BYTE = {
     PlantStatus: 9,
     BridgeStatus: 10,
     LoadGeometry: 11,
+    LogLine: 12,
 }
 NOT_FINITE = (math.nan, math.inf, -math.inf)
 
@@ -207,6 +212,8 @@ GEOMETRY = LoadGeometry(
     period_s=0.01,
     end_tick=1200,
 )
+LOG_LINE = LogLine(robot=2, tick=4321, level="warning", text="robot 2: lost neighbour 3; halting")
+LOG_LINE_FIRST = LogLine(robot=1, tick=-1, level="info", text="robot 1: up\n\t(é, ±, →)")
 
 MESSAGES = {
     "measurement": MEASUREMENT,
@@ -227,6 +234,8 @@ MESSAGES = {
     "load-geometry": GEOMETRY,
     "bridge-status": BRIDGE_STATUS,
     "bridge-status-velocity": BRIDGE_STATUS_VELOCITY,
+    "log-line": LOG_LINE,
+    "log-line-first": LOG_LINE_FIRST,
 }
 
 
@@ -475,6 +484,64 @@ def test_json_messages_are_checked_too() -> None:
     assert "sensor_stale_trips" in str(error)
 
 
+NOT_LOG_LINES = {
+    "robot 0": dict(robot=0),
+    "a tick below -1": dict(tick=-2),
+    "a tick past the domain": dict(tick=2**41),
+    "no such level": dict(level="debug"),
+    "a level in capitals": dict(level="WARNING"),
+    "a text too long": dict(text="x" * (MAX_LOG_TEXT + 1)),
+    "an escape sequence": dict(text="robot 2: \x1b[2J cleared"),
+    "a carriage return": dict(text="robot 2: ok\rforged"),
+    "a NUL": dict(text="robot 2\x00"),
+    "a C1 control": dict(text="robot 2: \x9b2J"),
+}
+
+
+@pytest.mark.parametrize("changes", NOT_LOG_LINES.values(), ids=NOT_LOG_LINES.keys())
+def test_a_log_line_out_of_its_domain_is_refused(changes: dict) -> None:
+    assert "log_line" in str(rejects(LogLine, encode(_with(LOG_LINE, **changes))))
+
+
+def test_a_log_line_with_a_lone_surrogate_is_refused() -> None:
+    """No UTF-8 for it: the wire's JSON refuses it, and the domain check (a recording's JSON
+    reader takes it) too."""
+    line = _with(LOG_LINE, text="robot 2: \ud800")
+    rejects(LogLine, encode(line))
+    with pytest.raises(DecodeError, match="log_line.text"):
+        DOMAINS[LogLine](line)
+
+
+LOG_LINE_WRONG_TYPES = {
+    "text-number": {"text": 5},
+    "text-list": {"text": ["a"]},
+    "text-null": {"text": None},
+    "level-number": {"level": 20},
+    "tick-string": {"tick": "7"},
+    "robot-float": {"robot": 2.5},
+    "unknown-key": {"colour": "red"},
+    "no text": {"text": None, "drop": "text"},
+}
+
+
+@pytest.mark.parametrize("changes", LOG_LINE_WRONG_TYPES.values(), ids=LOG_LINE_WRONG_TYPES.keys())
+def test_a_log_line_with_wrong_types_is_refused(changes: dict) -> None:
+    body = json.loads(encode(LOG_LINE)[3:]) | changes
+    body.pop(body.pop("drop", None), None)
+    rejects(LogLine, header(LogLine) + json.dumps(body).encode())
+
+
+def test_log_text_makes_any_text_a_log_lines() -> None:
+    assert log_text("robot 1: fine\n\tindented") == "robot 1: fine\n\tindented"
+    assert log_text("a\x1b[31mred\x00\r\x7f\ud800") == "a?[31mred????"
+    long = log_text("é" * (MAX_LOG_TEXT + 50))
+    assert len(long) == MAX_LOG_TEXT and long.endswith("…")
+    for text in ("\x1b" * 5000, "x" * MAX_LOG_TEXT, "\ud800\udc00", "".join(map(chr, range(256)))):
+        line = LogLine(1, 0, "info", log_text(text))
+        assert decode(LogLine, encode(line)) == line
+    assert set(LOG_LEVELS) == {"info", "warning", "error", "critical"}
+
+
 def test_the_bridges_profiles_are_the_dbcs() -> None:
     from bridge.dbc import PROFILES
 
@@ -549,6 +616,7 @@ def _sample_payload(kind) -> bytes:
             PlantStatus: PLANT_STATUS,
             BridgeStatus: BRIDGE_STATUS,
             LoadGeometry: GEOMETRY,
+            LogLine: LOG_LINE,
         }[kind]
     )
 
@@ -777,6 +845,7 @@ def test_non_finite_numbers_in_json_messages(kind, number: str) -> None:
         PlantStatus: "time_s",
         BridgeStatus: "frames_in",
         LoadGeometry: "period_s",
+        LogLine: "tick",
     }.get(kind, "mass")
     text = json.dumps(body).replace(f'"{key}": {json.dumps(body[key])}', f'"{key}": {number}')
     assert number in text
@@ -888,6 +957,7 @@ def test_key_shapes() -> None:
     assert keys.plant_status() == "heft/paper/plant/status"
     assert keys.geometry() == "heft/paper/plant/geometry"
     assert keys.control() == "heft/paper/control"
+    assert keys.log(2) == "heft/paper/robot/2/log"
     assert Keys("paper-1234_x").force(2) == "heft/paper-1234_x/robot/2/force"
 
 
@@ -898,6 +968,7 @@ def test_the_wildcards_are_methods_of_their_own() -> None:
     assert keys.all_forces() == "heft/paper/robot/*/force"
     assert keys.all_bridges() == "heft/paper/robot/*/bridge"
     assert keys.all_alive() == "heft/paper/robot/*/alive"
+    assert keys.all_logs() == "heft/paper/robot/*/log"
 
 
 @pytest.mark.parametrize("robot", [0, -1, True, 1.0, "1"])
@@ -906,7 +977,7 @@ def test_a_robot_key_needs_a_robot_id(robot) -> None:
         Keys("paper").share(robot)
 
 
-ROBOT_TOPICS = ("velocity", "force", "share", "estimate", "status", "bridge", "alive")
+ROBOT_TOPICS = ("velocity", "force", "share", "estimate", "status", "bridge", "log", "alive")
 
 
 @pytest.mark.parametrize("robot", [1, 4, 9, 65535])

@@ -331,6 +331,7 @@ def test_the_grants_follow_the_graph() -> None:
         keys.share(2),
         keys.estimate(2),
         keys.status(2),
+        keys.log(2),
         keys.bridge(2),
     }
     assert set(robot2.token) == {keys.alive(2), keys.bridge_alive(2)}

@@ -25,6 +25,7 @@ from agent.platform.protocol import (
     AGV_PROFILES,
     CLOCKS,
     CONTROL_COMMANDS,
+    LOG_LEVELS,
     Barrier,
     BridgeStatus,
     Clock,
@@ -34,12 +35,14 @@ from agent.platform.protocol import (
     Estimates,
     Keys,
     LoadGeometry,
+    LogLine,
     Measurement,
     Phase,
     PlantStatus,
     Share,
     Status,
     Truth,
+    log_text,
 )
 from agent.platform.team import TEAM_QUANTITIES, ConsensusState, flow_width
 from dashboard import channels
@@ -216,6 +219,13 @@ MESSAGES = st.one_of(
         sensor_stale=st.booleans(),
     ),
     st.integers(2, 8).flatmap(_geometries),
+    st.builds(
+        LogLine,
+        robot=ids,
+        tick=st.integers(-1, 2**40),
+        level=st.sampled_from(LOG_LEVELS),
+        text=st.text(max_size=300).map(log_text),
+    ),
 )
 """Random messages of every kind, each within its domain."""
 
@@ -281,6 +291,7 @@ FULL = [
         *(0.1, 0.2, 0.3, 0.02, 0.03, 0.5, 1.2, 1.6, (-0.9, 0.3), 0.4),
     ),
     Control("stop"),
+    LogLine(2, 7, "warning", "robot 2: lost neighbour 3; halting the team"),
     PlantStatus(7, 0.07, "realtime", 1, 2, 3, 4, 5, (3,), 1.5, 2.5, 1.6, 10),
     BridgeStatus(2, 7, True, *range(1, 13), 3, 4, "velocity", 0.1, 0.5, True, 2, 3, 4),
     LoadGeometry(3, ((-1.0, -1.0), (1.0, -1.0), (0.0, 1.0)), ((1, 2), (2, 3)), 0.01, 300),

@@ -23,6 +23,7 @@ from agent.platform.protocol import (
     Estimates,
     Keys,
     LoadGeometry,
+    LogLine,
     Measurement,
     Phase,
     PlantStatus,
@@ -332,6 +333,7 @@ EXAMPLES = [
     PlantStatus(7, 0.07, "realtime", 1, 2, 0, 0, 0, (3,), 1.5, 2.5, 1.6, 10),
     BridgeStatus(2, 7, watchdog=True, frames_in=5),
     LoadGeometry(2, ((-1.0, -1.0), (1.0, -1.0), (0.0, 1.0)), ((1, 2),), 0.01, 300),
+    LogLine(2, 7, "warning", "robot 2: lost neighbour 1; halting the team"),
 ]
 
 
