@@ -14,6 +14,9 @@ shows), :mod:`dashboard.feed` (the live Zenoh subscription), :mod:`dashboard.rec
 web app), :mod:`dashboard.app` (the FastAPI app), :mod:`dashboard.server` (uvicorn in a
 thread), :mod:`dashboard.display` (the page and a recorder as parts of a process),
 :mod:`dashboard.companion` (both beside a run of ``heft run``/``heft demo``),
+:mod:`dashboard.foxglove_live` (the team live to Foxglove through the Foxglove SDK's WebSocket
+server), :mod:`dashboard.relay` (that server on the app's own port, behind its token),
+:mod:`dashboard.log_entries` (the agents' log lines as Foxglove log messages),
 :mod:`dashboard.cli` (``heft dashboard``, ``heft record``); its benchmark, ``heft bench
 dashboard``, is :mod:`dashboard.bench`. The load's outline and the graph are the plant's
 (:class:`~agent.platform.protocol.LoadGeometry`), heard as the rest of the team's messages.

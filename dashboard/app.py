@@ -15,6 +15,9 @@
 ``WS /ws``                  a ``hello`` (the estimated scalars, charts and scene), then
                             ``frame``\\ s at ``frame_hz``: the charts' new points (with
                             their 95 % half-widths) and the scene
+``WS /foxglove``            with ``AppSettings.foxglove``: the Foxglove WebSocket protocol,
+                            relayed to the Foxglove SDK's server on loopback
+                            (:mod:`dashboard.foxglove_live`, :mod:`dashboard.relay`)
 ========================== ==============================================================
 
 Frames are built once per period for every page, only when something changed (or every
@@ -48,6 +51,7 @@ from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
 from dashboard.hub import REPLAY_STEP_S, Hub
+from dashboard.relay import relay
 from dashboard.replay import RecordingError
 
 STATIC = Path(__file__).with_name("static")
@@ -62,10 +66,13 @@ LOG = logging.getLogger("heft.dashboard")
 
 @dataclass(frozen=True)
 class AppSettings:
-    """How the app serves: frames per second and the token (None: no token needed)."""
+    """How the app serves: frames per second, the token (None: no token needed) and the
+    loopback address of a Foxglove WebSocket server to relay on ``/foxglove`` (None: no such
+    route)."""
 
     frame_hz: float = 20.0
     token: str | None = None
+    foxglove: str | None = None
 
 
 class ReplayCommand(BaseModel):
@@ -252,11 +259,17 @@ def create_app(hub: Hub, settings: AppSettings | None = None) -> FastAPI:
             raise HTTPException(400, str(err)) from None
         return hub.source()
 
+    async def refused(websocket: WebSocket) -> bool:
+        """Close ``websocket`` (before accepting it) unless it carries the token."""
+        given = _token_of(websocket.headers, websocket.query_params, websocket.cookies)
+        if _token_ok(settings.token, given):
+            return False
+        await websocket.close(code=1008, reason="a valid token is required")
+        return True
+
     @app.websocket("/ws")
     async def stream(websocket: WebSocket) -> None:
-        given = _token_of(websocket.headers, websocket.query_params, websocket.cookies)
-        if not _token_ok(settings.token, given):
-            await websocket.close(code=1008, reason="a valid token is required")
+        if await refused(websocket):
             return
         await websocket.accept()
         queue: asyncio.Queue = asyncio.Queue(maxsize=CLIENT_QUEUE)
@@ -272,6 +285,13 @@ def create_app(hub: Hub, settings: AppSettings | None = None) -> FastAPI:
             pass
         finally:
             broadcaster.clients.discard(queue)
+
+    if settings.foxglove is not None:
+
+        @app.websocket("/foxglove")
+        async def foxglove(websocket: WebSocket) -> None:
+            if not await refused(websocket):
+                await relay(websocket, settings.foxglove)
 
     @app.exception_handler(404)
     async def not_found(request: Request, exc) -> Response:

@@ -1,7 +1,7 @@
 """The dashboard package's commands::
 
-    heft dashboard [--team T] [--connect ENDPOINT] [--host H] [--port P] [--token TOKEN]
-                   [--replay FILE [--speed X] [--paused]]
+    heft dashboard [--team T [--foxglove]] [--connect ENDPOINT] [--host H] [--port P]
+                   [--token TOKEN] [--replay FILE [--speed X] [--paused]]
     heft record --team T -o FILE [--duration S] [Zenoh options]
 
 Both run until SIGINT, SIGTERM or SIGHUP (exit status 0); bad input is one ``heft: error:``
@@ -95,6 +95,11 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
 
         if args.team is not None or args.connect:
             raise UsageError("--replay plays a recording: --team and --connect do not apply")
+        if args.foxglove:
+            raise UsageError(
+                "--foxglove serves a live team: open the recording itself in Foxglove (it holds"
+                " the same topics)"
+            )
         if args.speed is not None:
             speed = _speed(args.speed)
         if not Path(args.replay).is_file():
@@ -116,6 +121,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
             host=args.host,
             port=args.port,
             token=token,
+            foxglove=args.foxglove,
         )
     except ServeError as err:
         raise _network_error(str(err)) from None
@@ -126,6 +132,8 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
         else:
             display.watch(settings)
         print(f"dashboard: {display.url}", flush=True)
+        if display.foxglove_url is not None:
+            print(f"foxglove: {display.foxglove_url}", flush=True)
         stop.wait()
     finally:
         display.close()
@@ -185,9 +193,15 @@ def _add_dashboard(commands: argparse._SubParsersAction) -> None:
             "outline as the plant publishes it), alarms and the final table (with the 95 %\n"
             "intervals).\n"
             "Prints 'dashboard: URL' once serving.\n\n"
+            "With --foxglove it also serves the team live to Foxglove, over the Foxglove\n"
+            "WebSocket protocol (the Foxglove SDK's server): the same topics as a recording\n"
+            "(heft record), at the team's rate. It prints 'foxglove: ws://HOST:PORT/foxglove':\n"
+            "in Foxglove, open a connection, choose 'Foxglove WebSocket' and give that URL.\n\n"
             "It listens on 127.0.0.1 unless told otherwise; any other address needs a token,\n"
             f"given with --token or ${TOKEN_ENV}, on every request (header\n"
-            "'Authorization: Bearer TOKEN', or ?token=TOKEN in the URL).\n\n"
+            "'Authorization: Bearer TOKEN', or ?token=TOKEN in the URL), Foxglove's\n"
+            "connection too. The page and Foxglove's connection are plain HTTP and ws://:\n"
+            "off this machine, prefer an SSH tunnel.\n\n"
             "Exit status: 0 stopped by SIGINT/SIGTERM/SIGHUP, 2 bad arguments, 4 the port is\n"
             "busy or the router does not answer."
         ),
@@ -195,10 +209,17 @@ def _add_dashboard(commands: argparse._SubParsersAction) -> None:
             "examples:\n"
             "  heft dashboard --team paper --connect tcp/127.0.0.1:7447\n"
             "  heft dashboard --replay run.mcap --speed 10\n"
-            "  heft dashboard --team paper --host 0.0.0.0 --token s3cret"
+            "  heft dashboard --team paper --host 0.0.0.0 --token s3cret\n"
+            "  heft dashboard --team paper --foxglove"
         ),
     )
     parser.add_argument("--team", help="the team to watch live (required without --replay)")
+    parser.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="also serve the team live to Foxglove on ws://HOST:PORT/foxglove (printed), behind"
+        " the same token",
+    )
     parser.add_argument(
         "--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)"
     )

@@ -1,7 +1,8 @@
 """The dashboard's two services as parts of a process: :class:`Display` (the page, served on a
-thread, fed live or by a replay) and :class:`TeamRecording` (a recorder with its own live
-subscription). ``heft dashboard`` and ``heft record`` each run one; ``heft demo`` holds both
-beside its run (:mod:`dashboard.companion`)."""
+thread, fed live or by a replay, and, if asked, the team live to Foxglove) and
+:class:`TeamRecording` (a recorder with its own live subscription). ``heft dashboard`` and
+``heft record`` each run one; ``heft demo`` holds both beside its run
+(:mod:`dashboard.companion`)."""
 
 from __future__ import annotations
 
@@ -18,12 +19,16 @@ DEFAULT_PORT = 8765
 class Display:
     """The dashboard as a part of a process: a hub, the app served on a thread, and the
     live feed once :meth:`watch` is called. ``heft dashboard`` is one; ``heft demo`` can
-    hold one beside its run."""
+    hold one beside its run. With :attr:`foxglove` (a
+    :class:`~dashboard.foxglove_live.LiveFoxglove`), the feed takes every key of the team and
+    Foxglove connects to :attr:`foxglove_url`."""
 
-    def __init__(self, hub, server, url: str):
+    def __init__(self, hub, server, url: str, foxglove=None, foxglove_url: str | None = None):
         self.hub = hub
         self.server = server
         self.url = url
+        self.foxglove = foxglove
+        self.foxglove_url = foxglove_url
         self.feed = None
 
     @classmethod
@@ -34,8 +39,10 @@ class Display:
         port: int = DEFAULT_PORT,
         token: str | None = None,
         recording: Path | None = None,
+        foxglove: bool = False,
     ) -> Display:
-        """Serve the page on ``host:port`` (:class:`~dashboard.server.ServeError` if taken)."""
+        """Serve the page on ``host:port`` (:class:`~dashboard.server.ServeError` if taken);
+        with ``foxglove``, team ``team`` live to Foxglove on ``/foxglove`` too."""
         from dashboard.app import AppSettings, create_app, missing_vendor
         from dashboard.hub import Hub
         from dashboard.server import Server
@@ -45,21 +52,39 @@ class Display:
             LOG.warning(
                 "dashboard: the page's charts will not draw: not installed: %s", "; ".join(missing)
             )
+        live = None
+        if foxglove:
+            from dashboard.foxglove_live import LiveFoxglove
+
+            if not team:
+                raise ValueError("Foxglove is served live for a team: name it")
+            live = LiveFoxglove(team)
+        settings = AppSettings(token=token, foxglove=None if live is None else live.url)
         hub = Hub(team or "", recording=recording)
-        server = Server(create_app(hub, AppSettings(token=token)), host, port).start()
-        url = server.url if token is None else f"{server.url}?token={token}"
-        return cls(hub, server, url)
+        try:
+            server = Server(create_app(hub, settings), host, port).start()
+        except BaseException:
+            if live is not None:
+                live.close()
+            raise
+        query = "" if token is None else f"?token={token}"
+        ws_url = None if live is None else f"ws{server.url.removeprefix('http')}foxglove{query}"
+        return cls(hub, server, server.url + query, live, ws_url)
 
     def watch(self, settings: ZenohSettings, team: str | None = None) -> None:
         """Follow team ``team`` (the hub's, by default) live through Zenoh."""
         from agent.platform.protocol import Keys
-        from dashboard.feed import LiveFeed
+        from dashboard.feed import LiveFeed, everything
 
         keys = Keys(team or self.hub.team)
         self.hub.team = keys.team
         self.hub.state.team = keys.team
+        sinks, subscriptions = [self.hub.ingest_batch], None
+        if self.foxglove is not None:
+            sinks.append(self.foxglove.ingest_batch)
+            subscriptions = everything(keys)
         self.feed = LiveFeed(
-            settings, keys, [self.hub.ingest_batch], liveliness=self.hub.liveliness
+            settings, keys, sinks, subscriptions, liveliness=self.hub.liveliness
         ).start()
 
     def close(self) -> None:
@@ -67,6 +92,8 @@ class Display:
             self.feed.close()
             self.feed = None
         self.hub.stop_replay()
+        if self.foxglove is not None:
+            self.foxglove.close()
         self.server.stop()
 
 

@@ -170,6 +170,7 @@ def heft(*argv: str) -> tuple[int, str]:
         (("--replay", "x.mcap", "--speed", "0"), "--speed: expected"),
         (("--team", "t", "--connect", "nowhere"), "--connect: expected an explicit endpoint"),
         (("--team", "t", "--scenario", "paper.toml"), "--scenario: no longer needed: the plant"),
+        (("--replay", "x.mcap", "--foxglove"), "--foxglove serves a live team: open the recording"),
     ],
 )
 def test_bad_input_is_one_error_line_and_status_2(argv, message, monkeypatch) -> None:
