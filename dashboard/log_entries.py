@@ -9,10 +9,9 @@ line's record in a recording).
 
 from __future__ import annotations
 
-from foxglove.messages import Log, LogLevel
+from foxglove.messages import Log, LogLevel, Timestamp
 
 from agent.platform.protocol import LogLine
-from dashboard.scene import timestamp
 
 LEVELS = {
     "info": LogLevel.Info,
@@ -23,10 +22,16 @@ LEVELS = {
 """Each of :data:`~agent.platform.protocol.LOG_LEVELS` as Foxglove's level."""
 
 
-def log_entry(line: LogLine, log_time_ns: int) -> Log:
-    """``line`` as a Foxglove log message at ``log_time_ns`` (ns since the epoch)."""
+def timestamp(ns: int) -> Timestamp:
+    """``ns`` (ns since the epoch, or since a run's start) as a Foxglove timestamp."""
+    sec, nsec = divmod(ns, 1_000_000_000)
+    return Timestamp(sec, nsec)
+
+
+def log_entry(line: LogLine, stamp: Timestamp) -> Log:
+    """``line`` as a Foxglove log message stamped ``stamp`` (its record's instant)."""
     return Log(
-        timestamp=timestamp(log_time_ns),
+        timestamp=stamp,
         level=LEVELS[line.level],
         message=line.text,
         name=f"robot {line.robot}",

@@ -70,9 +70,18 @@ from foxglove.messages import (
 )
 
 from agent.platform.geometry import Vec2, rotate
-from agent.platform.protocol import Command, Estimates, LoadGeometry, Phase, Status, Truth
+from agent.platform.protocol import (
+    STEP_NAMES,
+    Command,
+    Estimates,
+    LoadGeometry,
+    LogLine,
+    Phase,
+    Status,
+    Truth,
+)
+from dashboard.log_entries import log_entry, timestamp
 from dashboard.quantities import SCALARS
-from simulator.results import STEP_NAMES
 
 WORLD = "world"
 """The frame id of ``W``."""
@@ -171,6 +180,8 @@ class Scene:
             return [(self.topics.log, entry) for entry in self.news.estimates(message, stamp)]
         elif isinstance(message, Status):
             return [(self.topics.log, entry) for entry in self.news.status(message, stamp)]
+        elif isinstance(message, LogLine):
+            return [(self.topics.log, log_entry(message, stamp))]
         return []
 
     def update(self, truth: Truth, stamp: Timestamp) -> SceneUpdate:
@@ -213,12 +224,6 @@ class Scene:
         points = self.geometry.outline if self.geometry is not None else truth.contacts
         spans = [max(p[k] for p in points) - min(p[k] for p in points) for k in (0, 1)]
         return max(*spans, MIN_SIZE_M)
-
-
-def timestamp(ns: int) -> Timestamp:
-    """``ns`` (ns since the epoch, or since a run's start) as a Foxglove timestamp."""
-    sec, nsec = divmod(ns, 1_000_000_000)
-    return Timestamp(sec, nsec)
 
 
 def load_frame(truth: Truth, stamp: Timestamp) -> FrameTransform:

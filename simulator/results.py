@@ -49,6 +49,7 @@ from agent.platform.evaluation import (
     scalar_interval,
     true_relative,
 )
+from agent.platform.protocol import STEP_NAMES, STEPS
 
 if TYPE_CHECKING:
     from agent.platform.protocol import Estimates, Truth
@@ -58,17 +59,6 @@ if TYPE_CHECKING:
 FRICTION_KEYS = ("friction_torque", "friction_torque_std", "coulomb", "coulomb_std")
 """The floor's friction as a robot estimates it (:class:`~agent.platform.protocol.Estimates`):
 ``τ̂_c`` (N m) and ``μ̂`` with their standard deviations."""
-STEPS = tuple(range(1, 8))
-"""The paper's seven steps."""
-STEP_NAMES = {
-    1: "relative positions z_ij",
-    2: "centroid offsets z_i",
-    3: "angular velocity omega",
-    4: "moment of inertia J",
-    5: "COM offset z_C",
-    6: "COM velocity",
-    7: "mass m",
-}
 
 
 # ------------------------------------------------------------------------------ small helpers

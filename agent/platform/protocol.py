@@ -74,6 +74,19 @@ class Phase(IntEnum):
         return self.name.lower()
 
 
+STEPS = tuple(range(1, 8))
+"""The paper's seven steps."""
+STEP_NAMES = {
+    1: "relative positions z_ij",
+    2: "centroid offsets z_i",
+    3: "angular velocity omega",
+    4: "moment of inertia J",
+    5: "COM offset z_C",
+    6: "COM velocity",
+    7: "mass m",
+}
+
+
 @dataclass(frozen=True, slots=True)
 class Measurement:
     """Robot ``robot``'s sample at ``tick``: its contact point's velocity ``ṗ_Ci`` and the

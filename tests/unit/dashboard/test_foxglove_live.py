@@ -24,8 +24,9 @@ from agent.platform.protocol import (
 )
 from dashboard import channels
 from dashboard.display import Display
-from dashboard.log_entries import log_entry
+from dashboard.log_entries import log_entry, timestamp
 from dashboard.recorder import Recorder
+from dashboard.topics import Topics
 from tests.helpers.foxglove import decoder
 from tests.helpers.foxglove_ws import SUBPROTOCOL, FoxgloveClient, wait_until
 
@@ -176,7 +177,7 @@ def test_without_foxglove_there_is_no_foxglove_route() -> None:
 )
 def test_a_log_line_is_a_foxglove_log_message(level: str, foxglove_level: str) -> None:
     line = LogLine(3, 120, level, "robot 3: tick 120: phase inertia\n\tand more")
-    entry = log_entry(line, 1_700_000_001_250_000_007)
+    entry = log_entry(line, timestamp(1_700_000_001_250_000_007))
     schema = entry.get_schema()
     assert (schema.name, schema.encoding) == ("foxglove.Log", "protobuf")
     log = decoder(schema.name, schema.data).FromString(entry.encode())
@@ -186,3 +187,13 @@ def test_a_log_line_is_a_foxglove_log_message(level: str, foxglove_level: str) -
         log.DESCRIPTOR.fields_by_name["level"].enum_type.values_by_number[log.level].name
         == foxglove_level
     )
+
+
+def test_an_agents_log_line_is_recorded_and_on_the_teams_log() -> None:
+    keys = Keys("paper")
+    line = LogLine(2, 40, "warning", "robot 2: neighbour 3 lost")
+    record, log = Topics("paper").of(keys.log(2), line, 5_000_000_000)
+    assert (record.topic, record.schema.name) == (keys.log(2), "heft.LogLine")
+    assert (log.topic, log.schema.name, log.log_time_ns) == ("heft/paper/log", "foxglove.Log", 5e9)
+    entry = decoder(log.schema.name, log.schema.data).FromString(log.data)
+    assert (entry.message, entry.name, entry.timestamp.seconds) == (line.text, "robot 2", 5)
