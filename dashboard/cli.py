@@ -238,9 +238,12 @@ def _add_record(commands: argparse._SubParsersAction) -> None:
             "Record every message of a team (measurements, commands, shares, estimates,\n"
             "statuses, the plant's truth and clock, bridges' status) to an MCAP file with\n"
             "JSON-schema channels: it opens in Foxglove and PlotJuggler with named fields and\n"
-            "replays with heft dashboard --replay. Chunks are flushed every 0.5 s, so a\n"
-            "recorder that is killed leaves a file readable up to then; SIGINT, SIGTERM or\n"
-            "SIGHUP close it properly.\n\n"
+            "replays with heft dashboard --replay. Each message's log_time is its own instant\n"
+            "on the team's clock (the plant's simulated time: in lockstep it equals the\n"
+            "time_s of every message that has one), its publish_time the wall clock when it\n"
+            "was recorded.\n\n"
+            "SIGINT, SIGTERM or SIGHUP close the file properly. Chunks are flushed every\n"
+            "0.5 s, so a recorder that is killed leaves a file readable up to then.\n\n"
             "Exit status: 0 stopped, 2 bad arguments, 4 the router does not answer."
         ),
         epilog="example: heft record --team paper -o run.mcap --connect tcp/127.0.0.1:7447",

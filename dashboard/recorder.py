@@ -7,6 +7,10 @@ fields. Every robot's measurements and commands are recorded, not only the estim
 centralized estimator can be run on a recording afterwards, and the plant's load geometry is
 recorded as the rest is. A metadata record names the team (``heft.team``).
 
+Each message is stamped twice: ``log_time`` is its own instant on the team's clock (the
+plant's simulated time, :mod:`dashboard.timeline`), ``publish_time`` the wall clock when the
+recorder received it.
+
 A recording stays readable if its process is killed: messages are written in chunks closed
 at least every :data:`FLUSH_EVERY_S` (and whenever a chunk reaches :data:`CHUNK_BYTES`), and
 handed to the kernel at once, so a ``kill -9`` loses at most the last fraction of a second;

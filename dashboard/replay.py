@@ -34,11 +34,14 @@ class RecordingError(ValueError):
 
 @dataclass(frozen=True)
 class Recorded:
-    """One recorded message: when it was received (ns since the epoch), on which key."""
+    """One recorded message: when it was received (``time_ns``, the MCAP ``publish_time``: ns
+    since the epoch), on which key, and its own instant (``log_time_ns``: on the team's clock,
+    :mod:`dashboard.timeline`; a recording made before that clock has the arrival there too)."""
 
     time_ns: int
     key: str
     message: object
+    log_time_ns: int
 
 
 class Recording:
@@ -133,7 +136,7 @@ class Recording:
             self.rejected[kind.__name__, "invalid"] += 1
             return None
         self.read_count += 1
-        return Recorded(record.log_time, topic, message)
+        return Recorded(record.publish_time, topic, message, record.log_time)
 
 
 Sink = Callable[[Recorded, float], None]
@@ -142,6 +145,12 @@ Sink = Callable[[Recorded, float], None]
 
 class Replayer:
     """Plays a :class:`Recording` into ``sink`` on a thread of its own.
+
+    It is paced by when each message arrived (:attr:`Recorded.time_ns`, the ``publish_time``),
+    not by the message's own instant (``log_time``): the page replays what it showed live, a
+    lockstep run at the pace it ran and a stalled team stalled (the team's clock stops while
+    the wall clock, by which links age and alarms go off, goes on), and recordings whose
+    ``log_time`` was the arrival as well replay the same.
 
     ``speed`` is how many recorded seconds pass per wall-clock second (``0``: as fast as
     possible). :meth:`pause`, :meth:`play` and :meth:`step` (while paused: let ``seconds`` of

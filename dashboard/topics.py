@@ -7,7 +7,8 @@ message of a team into the same :class:`Outgoing` items, through one :class:`Top
   (:mod:`dashboard.channels`);
 - what Foxglove draws of it, in Foxglove's own schemas (the scene, the frames, the log lines);
 
-each stamped with its own instant (``log_time_ns``), not with the moment it arrived.
+each stamped with its own instant (``log_time_ns``, :mod:`dashboard.timeline`), not with the
+moment it arrived.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import json
 from dataclasses import dataclass
 
 from dashboard.channels import json_schema, record_bytes
+from dashboard.timeline import Timeline
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +46,7 @@ class Topics:
 
     def __init__(self, team: str):
         self.team = team
+        self.timeline = Timeline()
         self._schemas: dict[type, SchemaSpec] = {}
 
     def schema(self, kind: type) -> SchemaSpec:
@@ -57,5 +60,6 @@ class Topics:
     def of(self, key: str, message: object, received_ns: int) -> list[Outgoing]:
         """What ``message``, received on ``key`` at ``received_ns`` (ns since the epoch),
         puts on the topics."""
+        log_time_ns = self.timeline.log_time_ns(message, received_ns)
         data = record_bytes(message)
-        return [Outgoing(key, self.schema(type(message)), "json", data, received_ns)]
+        return [Outgoing(key, self.schema(type(message)), "json", data, log_time_ns)]

@@ -1,7 +1,8 @@
 """``heft record`` over Zenoh, as a process beside a team publishing on a router: it keeps every
 robot's measurements and commands and the plant's load geometry, closes its file on SIGTERM and
-leaves it readable up to the cut when killed with SIGKILL; and the live display follows a team,
-draws the load the plant describes and drops what is forged."""
+leaves it readable up to the cut when killed with SIGKILL; a lockstep run's recording is on the
+plant's clock (``log_time`` is ``time_s``); and the live display follows a team, draws the load
+the plant describes and drops what is forged."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import pytest
 from mcap.reader import make_reader
 
 from agent.platform.protocol import (
+    Clock,
     Command,
     Estimates,
     Keys,
@@ -28,7 +30,7 @@ from agent.platform.protocol import (
 from agent.platform.zenoh_session import ZenohSettings, open_session
 from dashboard.replay import Recording, Replayer
 from dashboard.state import TeamState
-from tests.helpers.paths import ROOT
+from tests.helpers.paths import PAPER, ROOT
 
 
 # ------------------------------------------------------------------------------ over Zenoh
@@ -154,6 +156,40 @@ def test_a_recording_killed_with_sigkill_replays_up_to_the_cut(tmp_path: Path) -
     replay = Replayer(Recording(path), lambda r, t: state.ingest(r.message, t), speed=0).start()
     assert replay.finished.wait(30)
     assert state.robots[1].estimates.tick >= last - 1
+
+
+@pytest.mark.slow
+def test_a_lockstep_runs_recording_is_on_the_plants_clock(tmp_path: Path) -> None:
+    """``heft run --transport zenoh --record``: every message with a ``time_s`` has it as its
+    ``log_time`` to the nanosecond, every tick-stamped one its tick's Clock's, one stamp per
+    tick; ``publish_time`` is the wall clock while the run ran."""
+    path = tmp_path / "lockstep.mcap"
+    started = time.time_ns()
+    run = subprocess.run(
+        [sys.executable, "-m", "agent", "run", str(PAPER), "--transport", "zenoh", "-q"]
+        + ["--record", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+    ended = time.time_ns()
+    assert run.returncode == 0, run.stderr
+    recording, messages = read_all(path)
+    assert recording.cut is None and not recording.rejected
+    clock = {r.message.tick: r.log_time_ns for r in messages if isinstance(r.message, Clock)}
+    timed = [r for r in messages if hasattr(r.message, "time_s")]
+    ticked = [
+        r
+        for r in messages
+        if not hasattr(r.message, "time_s") and getattr(r.message, "tick", -1) >= 0
+    ]
+    assert len(clock) > 500 and timed and ticked
+    assert [r.log_time_ns for r in timed] == [round(r.message.time_s * 1e9) for r in timed]
+    assert [r.log_time_ns for r in ticked] == [clock[r.message.tick] for r in ticked]
+    ticks = {r.message.tick for r in messages if getattr(r.message, "tick", -1) >= 0}
+    assert len({r.log_time_ns for r in messages}) == len(ticks)
+    assert all(started <= r.time_ns <= ended for r in messages)
 
 
 @pytest.mark.slow
