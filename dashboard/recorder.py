@@ -12,10 +12,14 @@ plant's simulated time, :mod:`dashboard.timeline`), ``publish_time`` the wall cl
 recorder received it.
 
 A recording stays readable if its process is killed: messages are written in chunks closed
-at least every :data:`FLUSH_EVERY_S` (and whenever a chunk reaches :data:`CHUNK_BYTES`), and
-handed to the kernel at once, so a ``kill -9`` loses at most the last fraction of a second;
-:meth:`Recorder.close` (on SIGINT, SIGTERM, SIGHUP, or the end of a run) writes the summary
-and index that make the file seekable. :mod:`dashboard.replay` reads either kind.
+at least every :data:`FLUSH_EVERY_S` (and whenever a chunk reaches
+:data:`~dashboard.recording_file.CHUNK_BYTES`), and handed to the kernel at once, so a ``kill
+-9`` loses at most the last fraction of a second; :meth:`Recorder.close` (on SIGINT, SIGTERM,
+SIGHUP, or the end of a run) writes the summary and index that make the file seekable.
+:mod:`dashboard.replay` reads either kind. While it writes, a recorder holds an exclusive lock
+on its file (:mod:`dashboard.recording_file`), which the kernel drops when the process dies: a
+recorder that starts repairs the cut files that killed recorders left in its folder
+(:func:`dashboard.repair.repair_leftovers`), and ``heft record --repair FILE`` any other.
 """
 
 from __future__ import annotations
@@ -24,17 +28,13 @@ import threading
 import time
 from pathlib import Path
 
-from mcap.writer import CompressionType, Writer
-
 from dashboard.channels import MESSAGE_KINDS
+from dashboard.recording_file import LIBRARY, TEAM_METADATA, mcap_writer, open_held
+from dashboard.repair import repair_leftovers
 from dashboard.topics import Outgoing, Topics
 
 FLUSH_EVERY_S = 0.5
 """The longest a recorded message waits in memory before it is in the file."""
-CHUNK_BYTES = 256 * 1024
-"""A chunk is closed when it reaches this size (uncompressed), or after FLUSH_EVERY_S."""
-TEAM_METADATA = "heft.team"
-LIBRARY = "heft"
 
 
 class Recorder:
@@ -52,10 +52,9 @@ class Recorder:
         self.flush_every_s = flush_every_s
         self.messages = 0
         self._lock = threading.Lock()
-        self._stream = open(self.path, "wb")  # noqa: SIM115 - closed by close()
-        self._writer = Writer(
-            self._stream, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD
-        )
+        repair_leftovers(self.path.parent, skip=self.path)
+        self._stream = open_held(self.path)
+        self._writer = mcap_writer(self._stream)
         self._writer.start(profile="", library=LIBRARY)
         self.topics = Topics(team)
         self._schemas: dict[str, int] = {}

@@ -15,13 +15,14 @@ from collections import Counter
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from agent.platform.protocol import DecodeError, Keys
 from dashboard.channels import from_record, kind_of
-from dashboard.recorder import TEAM_METADATA
+from dashboard.recording_file import MAGIC, TEAM_METADATA
 
 RECORD_LIMIT = 64 * 2**20
 """The largest MCAP record read (bytes): a corrupt length cannot make the reader allocate
@@ -44,6 +45,33 @@ class Recorded:
     log_time_ns: int
 
 
+class Records:
+    """An MCAP stream's records, front to back (iterate it once), up to its end or to where it
+    was cut: :attr:`cut` says where and why reading stopped before the end (None if it did
+    not). With ``validate_crcs``, a chunk whose data does not match its CRC is such a cut."""
+
+    def __init__(self, stream: BinaryIO, validate_crcs: bool = False):
+        self.stream = stream
+        self.validate_crcs = validate_crcs
+        self.cut: str | None = None
+
+    def __iter__(self) -> Iterator[object]:
+        stream = self.stream
+        reader = StreamReader(
+            stream, record_size_limit=RECORD_LIMIT, validate_crcs=self.validate_crcs
+        )
+        records = reader.records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except Exception as err:  # noqa: BLE001 - truncated: struct, mcap, zstd errors
+                self.cut = f"cut at byte {stream.tell()} ({type(err).__name__})"
+                return
+            yield record
+
+
 class Recording:
     """A recording, read once, front to back (iterate :meth:`messages`).
 
@@ -62,7 +90,7 @@ class Recording:
                 head = stream.read(8)
         except OSError as err:
             raise RecordingError(f"{self.path}: cannot read ({err.strerror or err})") from None
-        if head != b"\x89MCAP0\r\n":
+        if head != MAGIC:
             raise RecordingError(f"{self.path}: not an MCAP file")
 
     def header(self) -> str:
@@ -79,16 +107,9 @@ class Recording:
     def _records(self) -> Iterator[object]:
         """The file's records, up to its end or to where it was cut (:attr:`cut`)."""
         with open(self.path, "rb") as stream:
-            records = StreamReader(stream, record_size_limit=RECORD_LIMIT).records
-            while True:
-                try:
-                    record = next(records)
-                except StopIteration:
-                    return
-                except Exception as err:  # noqa: BLE001 - truncated: struct, mcap, zstd errors
-                    self.cut = f"cut at byte {stream.tell()} ({type(err).__name__})"
-                    return
-                yield record
+            records = Records(stream)
+            yield from records
+            self.cut = records.cut
 
     def messages(self, kinds: Collection[type] | None = None) -> Iterator[Recorded]:
         """Every valid message (of ``kinds`` only, if given: the others are not even

@@ -1,8 +1,9 @@
 """``heft record`` over Zenoh, as a process beside a team publishing on a router: it keeps every
 robot's measurements and commands and the plant's load geometry, closes its file on SIGTERM and
-leaves it readable up to the cut when killed with SIGKILL; a lockstep run's recording is on the
-plant's clock (``log_time`` is ``time_s``); and the live display follows a team, draws the load
-the plant describes and drops what is forged."""
+leaves it readable up to the cut when killed with SIGKILL, and ``heft record --repair`` makes
+that file whole; a lockstep run's recording is on the plant's clock (``log_time`` is
+``time_s``); and the live display follows a team, draws the load the plant describes and drops
+what is forged."""
 
 from __future__ import annotations
 
@@ -156,6 +157,23 @@ def test_a_recording_killed_with_sigkill_replays_up_to_the_cut(tmp_path: Path) -
     replay = Replayer(Recording(path), lambda r, t: state.ingest(r.message, t), speed=0).start()
     assert replay.finished.wait(30)
     assert state.robots[1].estimates.tick >= last - 1
+    # Repaired, the MCAP readers take it whole, with every message it held.
+    with open(path, "rb") as stream, pytest.raises(Exception):  # noqa: B017, PT011
+        make_reader(stream).get_summary()
+    repaired = subprocess.run(
+        [sys.executable, "-m", "agent", "record", "--repair", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+    assert repaired.returncode == 0, repaired.stderr
+    assert f"repaired, {len(messages)} messages kept" in repaired.stdout
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary.statistics.message_count == len(messages)
+    again, whole = read_all(path)
+    assert again.cut is None and whole == messages
 
 
 @pytest.mark.slow

@@ -16,7 +16,8 @@ from mcap.writer import Writer
 from agent.platform.evaluation import SCALAR_95
 from agent.platform.protocol import Clock, Estimates, Keys, Phase
 from dashboard.channels import record_bytes
-from dashboard.recorder import TEAM_METADATA, Recorder
+from dashboard.recorder import Recorder
+from dashboard.recording_file import TEAM_METADATA
 from dashboard.replay import Recording, RecordingError, Replayer
 from dashboard.state import TeamState
 from tests.helpers.floor import FLOOR
