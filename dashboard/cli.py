@@ -3,6 +3,7 @@
     heft dashboard [--team T [--foxglove]] [--connect ENDPOINT] [--host H] [--port P]
                    [--token TOKEN] [--replay FILE [--speed X] [--paused]]
     heft record --team T -o FILE [--duration S] [Zenoh options]
+    heft record --repair FILE
 
 Both run until SIGINT, SIGTERM or SIGHUP (exit status 0); bad input is one ``heft: error:``
 line and exit status 2; a busy port or an unreachable router is exit status 4.
@@ -149,10 +150,16 @@ def _network_error(message: str) -> Exception:
 
 # ------------------------------------------------------------------------------ heft record
 def cmd_record(args: argparse.Namespace) -> int:
-    """``heft record``: write a team's traffic to MCAP until a signal or ``--duration``."""
+    """``heft record``: write a team's traffic to MCAP until a signal or ``--duration``; or,
+    with ``--repair``, make a cut recording whole."""
     from agent.platform.process import StopSignals
     from dashboard.display import TeamRecording
 
+    if args.repair is not None:
+        return _repair(args)
+    for option, value in (("--team", args.team), ("-o/--output", args.output)):
+        if value is None:
+            raise UsageError(f"{option}: needed to record (or give --repair FILE)")
     keys = _keys(args.team)
     output = Path(args.output)
     check_writable(output)
@@ -162,13 +169,42 @@ def cmd_record(args: argparse.Namespace) -> int:
     settings = zenoh_settings(args, ZenohSettings(mode="client", connect=(DEFAULT_ROUTER,)))
     setup_logging(args)
     stop = StopSignals().handle().event
-    recording = TeamRecording.open(output, keys.team, settings)
+    try:
+        recording = TeamRecording.open(output, keys.team, settings)
+    except BlockingIOError as err:
+        raise UsageError(f"-o: {err}") from None
     LOG.info("recording team %r to %s", keys.team, output)
     try:
         stop.wait(args.duration)
     finally:
         recording.close()
     LOG.info("recorded %d messages to %s", recording.recorder.messages, output)
+    return 0
+
+
+def _repair(args: argparse.Namespace) -> int:
+    """``heft record --repair FILE``: rewrite a cut recording into a complete one."""
+    from dashboard.repair import repair
+    from dashboard.replay import RecordingError
+
+    options = (("--team", args.team), ("-o", args.output), ("--duration", args.duration))
+    given = [option for option, value in options if value is not None]
+    if args.connect:
+        given.append("--connect")
+    if given:
+        apply = "does not apply" if len(given) == 1 else "do not apply"
+        raise UsageError(f"--repair rewrites a file: {', '.join(given)} {apply}")
+    if not Path(args.repair).is_file():
+        raise UsageError(f"--repair: {args.repair}: no such file")
+    try:
+        done = repair(args.repair)
+    except RecordingError as err:
+        raise UsageError(f"--repair: {err}") from None
+    messages = f"{done.messages} message{'' if done.messages == 1 else 's'}"
+    if done.cut is None:
+        print(f"{done.path}: complete ({messages}), nothing to repair")
+    else:
+        print(f"{done.path}: repaired, {messages} kept ({done.cut})")
     return 0
 
 
@@ -259,16 +295,33 @@ def _add_record(commands: argparse._SubParsersAction) -> None:
             "Record every message of a team (measurements, commands, shares, estimates,\n"
             "statuses, the plant's truth and clock, bridges' status) to an MCAP file with\n"
             "JSON-schema channels: it opens in Foxglove and PlotJuggler with named fields and\n"
-            "replays with heft dashboard --replay. Chunks are flushed every 0.5 s, so a\n"
-            "recorder that is killed leaves a file readable up to then; SIGINT, SIGTERM or\n"
-            "SIGHUP close it properly.\n\n"
-            "Exit status: 0 stopped, 2 bad arguments, 4 the router does not answer."
+            "replays with heft dashboard --replay. Each message's log_time is its own instant\n"
+            "on the team's clock (the plant's simulated time: in lockstep it equals the\n"
+            "time_s of every message that has one), its publish_time the wall clock when it\n"
+            "was recorded.\n\n"
+            "SIGINT, SIGTERM or SIGHUP close the file properly. Chunks are flushed every\n"
+            "0.5 s, so a recorder that is killed leaves a file readable up to then (heft\n"
+            "dashboard --replay reads it); the MCAP tools want it whole: --repair FILE\n"
+            "rewrites it with every message it holds, and a recorder that starts repairs\n"
+            "those that killed recorders left in its folder.\n\n"
+            "Exit status: 0 stopped (or repaired), 2 bad arguments or file, 4 the router\n"
+            "does not answer."
         ),
-        epilog="example: heft record --team paper -o run.mcap --connect tcp/127.0.0.1:7447",
+        epilog=(
+            "examples:\n"
+            "  heft record --team paper -o run.mcap --connect tcp/127.0.0.1:7447\n"
+            "  heft record --repair run.mcap"
+        ),
     )
-    parser.add_argument("--team", required=True, help="the team to record (required)")
+    parser.add_argument("--team", help="the team to record (required to record)")
     parser.add_argument(
-        "-o", "--output", required=True, metavar="FILE", help="the MCAP file to write (required)"
+        "-o", "--output", metavar="FILE", help="the MCAP file to write (required to record)"
+    )
+    parser.add_argument(
+        "--repair",
+        metavar="FILE",
+        help="rewrite FILE, a recording cut short (its recorder killed), into a complete one"
+        " with every message it holds, and exit",
     )
     parser.add_argument("--scenario", help=argparse.SUPPRESS)  # refused: see _no_scenario
     parser.add_argument(

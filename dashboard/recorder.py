@@ -7,11 +7,19 @@ fields. Every robot's measurements and commands are recorded, not only the estim
 centralized estimator can be run on a recording afterwards, and the plant's load geometry is
 recorded as the rest is. A metadata record names the team (``heft.team``).
 
+Each message is stamped twice: ``log_time`` is its own instant on the team's clock (the
+plant's simulated time, :mod:`dashboard.timeline`), ``publish_time`` the wall clock when the
+recorder received it.
+
 A recording stays readable if its process is killed: messages are written in chunks closed
-at least every :data:`FLUSH_EVERY_S` (and whenever a chunk reaches :data:`CHUNK_BYTES`), and
-handed to the kernel at once, so a ``kill -9`` loses at most the last fraction of a second;
-:meth:`Recorder.close` (on SIGINT, SIGTERM, SIGHUP, or the end of a run) writes the summary
-and index that make the file seekable. :mod:`dashboard.replay` reads either kind.
+at least every :data:`FLUSH_EVERY_S` (and whenever a chunk reaches
+:data:`~dashboard.recording_file.CHUNK_BYTES`), and handed to the kernel at once, so a ``kill
+-9`` loses at most the last fraction of a second; :meth:`Recorder.close` (on SIGINT, SIGTERM,
+SIGHUP, or the end of a run) writes the summary and index that make the file seekable.
+:mod:`dashboard.replay` reads either kind. While it writes, a recorder holds an exclusive lock
+on its file (:mod:`dashboard.recording_file`), which the kernel drops when the process dies: a
+recorder that starts repairs the cut files that killed recorders left in its folder
+(:func:`dashboard.repair.repair_leftovers`), and ``heft record --repair FILE`` any other.
 """
 
 from __future__ import annotations
@@ -20,17 +28,13 @@ import threading
 import time
 from pathlib import Path
 
-from mcap.writer import CompressionType, Writer
-
 from dashboard.channels import MESSAGE_KINDS, RECORD_FORMAT
+from dashboard.recording_file import LIBRARY, TEAM_METADATA, mcap_writer, open_held
+from dashboard.repair import repair_leftovers
 from dashboard.topics import Outgoing, Topics
 
 FLUSH_EVERY_S = 0.5
 """The longest a recorded message waits in memory before it is in the file."""
-CHUNK_BYTES = 256 * 1024
-"""A chunk is closed when it reaches this size (uncompressed), or after FLUSH_EVERY_S."""
-TEAM_METADATA = "heft.team"
-LIBRARY = "heft"
 
 
 class Recorder:
@@ -48,10 +52,9 @@ class Recorder:
         self.flush_every_s = flush_every_s
         self.messages = 0
         self._lock = threading.Lock()
-        self._stream = open(self.path, "wb")  # noqa: SIM115 - closed by close()
-        self._writer = Writer(
-            self._stream, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD
-        )
+        repair_leftovers(self.path.parent, skip=self.path)
+        self._stream = open_held(self.path)
+        self._writer = mcap_writer(self._stream)
         self._writer.start(profile="", library=LIBRARY)
         self.topics = Topics(team)
         self._schemas: dict[str, int] = {}
@@ -83,14 +86,19 @@ class Recorder:
         with self._lock:
             if self._closed:
                 return
-            for out in self.topics.of(key, message, received):
-                channel = self._channel(out)
-                self._writer.add_message(
-                    channel, log_time=out.log_time_ns, data=out.data, publish_time=received
-                )
-                self.messages += 1
+            self._add(self.topics.of(key, message, received), received)
             if time.monotonic() - self._flushed_at >= self.flush_every_s:
                 self._flush()
+
+    def _add(self, items: list[Outgoing], received_ns: int) -> None:
+        for out in items:
+            self._writer.add_message(
+                self._channel(out),
+                log_time=out.log_time_ns,
+                data=out.data,
+                publish_time=received_ns,
+            )
+            self.messages += 1
 
     def flush(self) -> None:
         """Close the current chunk and hand the file's bytes to the kernel."""
@@ -112,6 +120,7 @@ class Recorder:
                 return
             self._closed = True
             try:
+                self._add(self.topics.flush(), time.time_ns())  # held for the team's clock
                 self._writer.finish()
             finally:
                 self._stream.close()

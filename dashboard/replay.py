@@ -16,13 +16,14 @@ from collections import Counter
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from agent.platform.protocol import DecodeError, Keys
 from dashboard.channels import RECORD_FORMATS, from_record, kind_of
-from dashboard.recorder import TEAM_METADATA
+from dashboard.recording_file import MAGIC, TEAM_METADATA
 
 RECORD_LIMIT = 64 * 2**20
 """The largest MCAP record read (bytes): a corrupt length cannot make the reader allocate
@@ -35,11 +36,41 @@ class RecordingError(ValueError):
 
 @dataclass(frozen=True)
 class Recorded:
-    """One recorded message: when it was received (ns since the epoch), on which key."""
+    """One recorded message: when it was received (``time_ns``, the MCAP ``publish_time``: ns
+    since the epoch), on which key, and its own instant (``log_time_ns``: on the team's clock,
+    :mod:`dashboard.timeline`; a recording made before that clock has the arrival there too)."""
 
     time_ns: int
     key: str
     message: object
+    log_time_ns: int
+
+
+class Records:
+    """An MCAP stream's records, front to back (iterate it once), up to its end or to where it
+    was cut: :attr:`cut` says where and why reading stopped before the end (None if it did
+    not). With ``validate_crcs``, a chunk whose data does not match its CRC is such a cut."""
+
+    def __init__(self, stream: BinaryIO, validate_crcs: bool = False):
+        self.stream = stream
+        self.validate_crcs = validate_crcs
+        self.cut: str | None = None
+
+    def __iter__(self) -> Iterator[object]:
+        stream = self.stream
+        reader = StreamReader(
+            stream, record_size_limit=RECORD_LIMIT, validate_crcs=self.validate_crcs
+        )
+        records = reader.records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except Exception as err:  # noqa: BLE001 - truncated: struct, mcap, zstd errors
+                self.cut = f"cut at byte {stream.tell()} ({type(err).__name__})"
+                return
+            yield record
 
 
 class Recording:
@@ -62,7 +93,7 @@ class Recording:
                 head = stream.read(8)
         except OSError as err:
             raise RecordingError(f"{self.path}: cannot read ({err.strerror or err})") from None
-        if head != b"\x89MCAP0\r\n":
+        if head != MAGIC:
             raise RecordingError(f"{self.path}: not an MCAP file")
 
     def header(self) -> str:
@@ -79,16 +110,9 @@ class Recording:
     def _records(self) -> Iterator[object]:
         """The file's records, up to its end or to where it was cut (:attr:`cut`)."""
         with open(self.path, "rb") as stream:
-            records = StreamReader(stream, record_size_limit=RECORD_LIMIT).records
-            while True:
-                try:
-                    record = next(records)
-                except StopIteration:
-                    return
-                except Exception as err:  # noqa: BLE001 - truncated: struct, mcap, zstd errors
-                    self.cut = f"cut at byte {stream.tell()} ({type(err).__name__})"
-                    return
-                yield record
+            records = Records(stream)
+            yield from records
+            self.cut = records.cut
 
     def messages(self, kinds: Collection[type] | None = None) -> Iterator[Recorded]:
         """Every valid message (of ``kinds`` only, if given: the others are not even
@@ -149,7 +173,7 @@ class Recording:
             self.rejected[kind.__name__, "invalid"] += 1
             return None
         self.read_count += 1
-        return Recorded(record.log_time, topic, message)
+        return Recorded(record.publish_time, topic, message, record.log_time)
 
 
 Sink = Callable[[Recorded, float], None]
@@ -158,6 +182,12 @@ Sink = Callable[[Recorded, float], None]
 
 class Replayer:
     """Plays a :class:`Recording` into ``sink`` on a thread of its own.
+
+    It is paced by when each message arrived (:attr:`Recorded.time_ns`, the ``publish_time``),
+    not by the message's own instant (``log_time``): the page replays what it showed live, a
+    lockstep run at the pace it ran and a stalled team stalled (the team's clock stops while
+    the wall clock, by which links age and alarms go off, goes on), and recordings whose
+    ``log_time`` was the arrival as well replay the same.
 
     ``speed`` is how many recorded seconds pass per wall-clock second (``0``: as fast as
     possible). :meth:`pause`, :meth:`play` and :meth:`step` (while paused: let ``seconds`` of

@@ -7,7 +7,8 @@ message of a team into the same :class:`Outgoing` items, through one :class:`Top
   (:mod:`dashboard.channels`);
 - what Foxglove draws of it, in Foxglove's own schemas (the scene, the frames, the log lines);
 
-each stamped with its own instant (``log_time_ns``), not with the moment it arrived.
+each stamped with its own instant (``log_time_ns``, :mod:`dashboard.timeline`), not with the
+moment it arrived.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 
 from dashboard.channels import json_schema, record_bytes
 from dashboard.scene import Scene
+from dashboard.timeline import Timeline
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,12 +42,21 @@ class Outgoing:
     log_time_ns: int
 
 
+HOLD_S = 2.0
+"""The longest a message without an instant waits for the team's clock to be known (wall-clock
+seconds, counted from the first one held); :data:`HOLD_LIMIT` messages at most."""
+HOLD_LIMIT = 1000
+
+
 class Topics:
     """One team's messages as :class:`Outgoing` items (:meth:`of`), in the order received."""
 
     def __init__(self, team: str):
         self.team = team
         self.scene = Scene(team)
+        self.timeline = Timeline()
+        self._held: list[tuple[str, object, int]] = []
+        """What arrived before the team's clock was known: ``(key, message, arrival)``."""
         self._schemas: dict[type, SchemaSpec] = {}
 
     def schema(self, kind: type) -> SchemaSpec:
@@ -68,10 +79,37 @@ class Topics:
     def of(self, key: str, message: object, received_ns: int) -> list[Outgoing]:
         """What ``message``, received on ``key`` at ``received_ns`` (ns since the epoch),
         puts on the topics: its record, then what Foxglove draws of it
-        (:class:`~dashboard.scene.Scene`), at the same instant."""
+        (:class:`~dashboard.scene.Scene`), all at the message's own instant
+        (:class:`~dashboard.timeline.Timeline`). A message that has no instant before the
+        team's clock is known is held (none is returned for it) and comes out with the
+        message that makes it known, at its instant, or after :data:`HOLD_S` at its arrival."""
+        log_time_ns = self.timeline.log_time_ns(message, received_ns)
+        if log_time_ns is None:
+            self._held.append((key, message, received_ns))
+            first = self._held[0][2]
+            if len(self._held) < HOLD_LIMIT and received_ns - first < HOLD_S * 1e9:
+                return []
+            self.timeline.on_wall()
+            return self.flush()
+        return [*self.flush(), *self._items(key, message, log_time_ns)]
+
+    def flush(self) -> list[Outgoing]:
+        """What is held, stamped: at the team's first instant if it is known, else at each
+        message's arrival (a recorder closing with nothing else heard)."""
+        if not self._held:
+            return []
+        held, self._held = self._held, []
+        if self.timeline.origin_ns is None:
+            self.timeline.on_wall()
+        out: list[Outgoing] = []
+        for key, message, received_ns in held:
+            out += self._items(key, message, self.timeline.log_time_ns(message, received_ns))
+        return out
+
+    def _items(self, key: str, message: object, log_time_ns: int) -> list[Outgoing]:
         data = record_bytes(message)
-        record = Outgoing(key, self.schema(type(message)), "json", data, received_ns)
-        return [record, *self._drawn(message, record.log_time_ns)]
+        record = Outgoing(key, self.schema(type(message)), "json", data, log_time_ns)
+        return [record, *self._drawn(message, log_time_ns)]
 
     def _drawn(self, message: object, log_time_ns: int) -> list[Outgoing]:
         return [

@@ -28,7 +28,8 @@ Then it stops the plant, tells the agents to stop, and — whatever happened, su
 a signal — stops every child it started (SIGTERM to all, then SIGKILL to what is left) and
 closes its own session. Every child (:class:`~agent.platform.children.Child`) also asks the kernel
 (Linux ``PR_SET_PDEATHSIG``) for a signal when the launcher dies, so even a ``kill -9`` of the
-launcher leaves no orphan.
+launcher leaves no orphan; and the folder of the processes' files that such a launcher leaves
+is removed by the next run (:mod:`simulator.run_folder`).
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ import math
 import os
 import re
 import sys
-import tempfile
 import threading
 import time
 from collections import defaultdict
@@ -77,6 +77,7 @@ from bridge.config import CanSettings, can_table
 from simulator.history import History
 from simulator.inprocess import RunOutcome, Sample
 from simulator.lockstep import INTERRUPTED, RunEnd, Verdict, halted
+from simulator.run_folder import run_folder
 from simulator.scenario import Agvs, Scenario, scenario_to_toml
 
 if TYPE_CHECKING:
@@ -525,8 +526,7 @@ def run_zenoh(
     cpu: dict[str, float | None] = {}
     verdict = Verdict(INTERRUPTED, "asked to stop")
     collector: Collector | None = None
-    with tempfile.TemporaryDirectory(prefix="heft-run-") as tmp:
-        folder = Path(tmp)
+    with run_folder() as folder:
         scenario_file = folder / "scenario.toml"
         scenario_file.write_text(scenario_to_toml(scenario), encoding="utf-8")
         try:

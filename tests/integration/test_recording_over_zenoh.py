@@ -1,10 +1,13 @@
 """``heft record`` over Zenoh, as a process beside a team publishing on a router: it keeps every
 robot's measurements and commands and the plant's load geometry, closes its file on SIGTERM and
-leaves it readable up to the cut when killed with SIGKILL; and the live display follows a team,
-draws the load the plant describes and drops what is forged."""
+leaves it readable up to the cut when killed with SIGKILL, and ``heft record --repair`` makes
+that file whole; a lockstep run's recording is on the plant's clock (``log_time`` is
+``time_s``); and the live display follows a team, draws the load the plant describes and drops
+what is forged."""
 
 from __future__ import annotations
 
+import io
 import os
 import signal
 import subprocess
@@ -15,8 +18,11 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
+from mcap.records import Message
+from mcap.stream_reader import StreamReader
 
 from agent.platform.protocol import (
+    Clock,
     Command,
     Estimates,
     Keys,
@@ -28,7 +34,7 @@ from agent.platform.protocol import (
 from agent.platform.zenoh_session import ZenohSettings, open_session
 from dashboard.replay import Recording, Replayer
 from dashboard.state import TeamState
-from tests.helpers.paths import ROOT
+from tests.helpers.paths import PAPER, ROOT
 
 
 # ------------------------------------------------------------------------------ over Zenoh
@@ -141,6 +147,19 @@ def test_heft_record_closes_its_file_on_sigterm(tmp_path: Path) -> None:
     check_stream(messages)
 
 
+def messages_before_the_cut(data: bytes) -> int:
+    """The messages of every channel in a cut MCAP file, read up to the cut."""
+    count, records = 0, StreamReader(io.BytesIO(data)).records
+    while True:
+        try:
+            record = next(records)
+        except StopIteration:
+            return count
+        except Exception:  # noqa: BLE001 - the cut: a truncated record
+            return count
+        count += isinstance(record, Message)
+
+
 @pytest.mark.slow
 def test_a_recording_killed_with_sigkill_replays_up_to_the_cut(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
@@ -161,6 +180,60 @@ def test_a_recording_killed_with_sigkill_replays_up_to_the_cut(tmp_path: Path) -
     replay = Replayer(Recording(path), lambda r, t: state.ingest(r.message, t), speed=0).start()
     assert replay.finished.wait(30)
     assert state.robots[1].estimates.tick >= last - 1
+    # Repaired, the MCAP readers take it whole, with every message it held.
+    cut = path.read_bytes()
+    with open(path, "rb") as stream, pytest.raises(Exception):  # noqa: B017, PT011
+        make_reader(stream).get_summary()
+    repaired = subprocess.run(
+        [sys.executable, "-m", "agent", "record", "--repair", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+    assert repaired.returncode == 0, repaired.stderr
+    held = messages_before_the_cut(cut)
+    assert held > len(messages)  # the team's records, and what Foxglove draws of them
+    assert f"repaired, {held} messages kept" in repaired.stdout
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary.statistics.message_count == held
+    again, whole = read_all(path)
+    assert again.cut is None and whole == messages
+
+
+@pytest.mark.slow
+def test_a_lockstep_runs_recording_is_on_the_plants_clock(tmp_path: Path) -> None:
+    """``heft run --transport zenoh --record``: every message with a ``time_s`` has it as its
+    ``log_time`` to the nanosecond, every tick-stamped one its tick's Clock's, one stamp per
+    tick; ``publish_time`` is the wall clock while the run ran."""
+    path = tmp_path / "lockstep.mcap"
+    started = time.time_ns()
+    run = subprocess.run(
+        [sys.executable, "-m", "agent", "run", str(PAPER), "--transport", "zenoh", "-q"]
+        + ["--record", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+    ended = time.time_ns()
+    assert run.returncode == 0, run.stderr
+    recording, messages = read_all(path)
+    assert recording.cut is None and not recording.rejected
+    clock = {r.message.tick: r.log_time_ns for r in messages if isinstance(r.message, Clock)}
+    timed = [r for r in messages if hasattr(r.message, "time_s")]
+    ticked = [
+        r
+        for r in messages
+        if not hasattr(r.message, "time_s") and getattr(r.message, "tick", -1) >= 0
+    ]
+    assert len(clock) > 500 and timed and ticked
+    assert [r.log_time_ns for r in timed] == [round(r.message.time_s * 1e9) for r in timed]
+    assert [r.log_time_ns for r in ticked] == [clock[r.message.tick] for r in ticked]
+    ticks = {r.message.tick for r in messages if getattr(r.message, "tick", -1) >= 0}
+    assert len({r.log_time_ns for r in messages}) == len(ticks)
+    assert all(started <= r.time_ns <= ended for r in messages)
 
 
 @pytest.mark.slow

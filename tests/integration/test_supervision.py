@@ -9,7 +9,6 @@ import contextlib
 import io
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -21,6 +20,7 @@ import pytest
 
 from agent.platform.heft import main
 from simulator import launcher
+from simulator.run_folder import run_folder
 from simulator.scenario import load_scenario
 from tests.helpers.accuracy import worst_errors
 from tests.helpers.paths import PAPER, ROOT
@@ -214,7 +214,12 @@ def test_a_killed_launcher_leaves_no_orphan(launched, tmp_path) -> None:
     run.process.wait(timeout=10)
     _nothing_left(run.pid, within_s=5.0)  # each child was killed by the kernel
     assert not out.exists()  # nothing could be written, and nothing empty was left
-    shutil.rmtree(Path(config).parent)  # the launcher's folder, which it had no time to remove
+    # The launcher's folder, which it had no time to remove, goes as the next run starts.
+    folder = Path(config).parent
+    assert folder.name.startswith(f"heft-run-{run.pid}-") and folder.is_dir()
+    with run_folder(folder.parent) as next_one:
+        assert not folder.exists() and next_one.is_dir()
+    assert not next_one.exists()
 
 
 # ------------------------------------------------------------------------------ at start

@@ -11,10 +11,13 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from agent.platform.evaluation import SCALAR_95
-from agent.platform.protocol import Estimates, Keys, Phase
+from agent.platform.protocol import Clock, Estimates, Keys, Phase
+from dashboard.channels import record_bytes
 from dashboard.recorder import Recorder
+from dashboard.recording_file import TEAM_METADATA
 from dashboard.replay import Recording, RecordingError, Replayer
 from dashboard.state import TeamState
 from tests.helpers.floor import FLOOR
@@ -135,3 +138,56 @@ def test_a_recording_carries_the_floors_friction(tmp_path: Path) -> None:
     assert series["coulomb/1"] == [[2.0, 0.0201, round(1e-4 * SCALAR_95, 9)]]
     assert series["friction_torque/truth"] == [[2.0, round(truth.coulomb_torque, 9)]]
     assert series["coulomb/truth"] == [[2.0, 0.02]]
+
+
+def _positions(path: Path) -> list[tuple[float, object, int, int]]:
+    """Each message as a replay delivers it: the recording's clock then, the message, its
+    arrival and its instant (ns)."""
+    delivered = []
+    replayer = Replayer(
+        Recording(path),
+        lambda r, t: delivered.append((t, r.message, r.time_ns, r.log_time_ns)),
+        speed=0,
+    ).start()
+    assert replayer.finished.wait(10)
+    return delivered
+
+
+def test_a_replay_is_paced_by_arrival_and_reads_each_messages_instant(tmp_path: Path) -> None:
+    """A lockstep run: ten ticks of the plant's clock (100 ms) arrive within 5 ms of the wall
+    clock. The replay plays them as they arrived (the page as it was live); each message's own
+    instant, ``time_s``, is read back as ``log_time_ns``."""
+    keys = Keys("pace")
+    path = tmp_path / "pace.mcap"
+    start = 1_800_000_000_000_000_000
+    arrivals = [start + k * 500_000 for k in range(10)]
+    with Recorder(path, "pace") as recorder:
+        for k, at in enumerate(arrivals):
+            recorder.write(keys.clock(), Clock(k, k * 0.01), at)
+    delivered = _positions(path)
+    assert [m.tick for _, m, _, _ in delivered] == list(range(10))
+    assert [at for _, _, at, _ in delivered] == arrivals
+    assert [t for t, _, _, _ in delivered] == [(at - start) / 1e9 for at in arrivals]
+    assert [log for _, _, _, log in delivered] == [round(k * 0.01 * 1e9) for k in range(10)]
+
+
+def test_a_recording_stamped_with_arrivals_still_replays(tmp_path: Path) -> None:
+    """Recordings made before ``log_time`` was the team's clock have the arrival in both
+    stamps: they replay as they did."""
+    keys = Keys("old")
+    path = tmp_path / "old.mcap"
+    start = 1_700_000_000_000_000_000
+    with open(path, "wb") as stream:
+        writer = Writer(stream)
+        writer.start(library="heft")
+        writer.add_metadata(TEAM_METADATA, {"team": "old"})
+        schema = writer.register_schema("heft.Clock", "jsonschema", b"{}")
+        channel = writer.register_channel(keys.clock(), "json", schema)
+        for k in range(5):
+            at = start + k * 10_000_000
+            writer.add_message(channel, at, record_bytes(Clock(k, k * 0.01)), at)
+        writer.finish()
+    delivered = _positions(path)
+    assert [m for _, m, _, _ in delivered] == [Clock(k, k * 0.01) for k in range(5)]
+    assert [t for t, _, _, _ in delivered] == [k * 0.01 for k in range(5)]
+    assert all(at == log for _, _, at, log in delivered)
