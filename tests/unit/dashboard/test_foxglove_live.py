@@ -191,9 +191,12 @@ def test_a_log_line_is_a_foxglove_log_message(level: str, foxglove_level: str) -
 
 def test_an_agents_log_line_is_recorded_and_on_the_teams_log() -> None:
     keys = Keys("paper")
+    topics = Topics("paper")
+    topics.of(keys.clock(), Clock(40, 0.4), START_NS)
     line = LogLine(2, 40, "warning", "robot 2: neighbour 3 lost")
-    record, log = Topics("paper").of(keys.log(2), line, 5_000_000_000)
+    record, log = topics.of(keys.log(2), line, START_NS + 1)
     assert (record.topic, record.schema.name) == (keys.log(2), "heft.LogLine")
-    assert (log.topic, log.schema.name, log.log_time_ns) == ("heft/paper/log", "foxglove.Log", 5e9)
+    assert (log.topic, log.schema.name) == ("heft/paper/log", "foxglove.Log")
+    assert record.log_time_ns == log.log_time_ns == 400_000_000  # tick 40 on the plant's clock
     entry = decoder(log.schema.name, log.schema.data).FromString(log.data)
-    assert (entry.message, entry.name, entry.timestamp.seconds) == (line.text, "robot 2", 5)
+    assert (entry.message, entry.name, entry.timestamp.nanos) == (line.text, "robot 2", 4e8)
