@@ -107,10 +107,10 @@ class Recorder:
                 self._flush()
 
     def _flush(self) -> None:
-        # The writer closes a chunk by size only; closing it by time as well is what keeps a
-        # killed recorder's file readable up to the last flush.
-        self._writer._Writer__finalize_chunk()  # noqa: SLF001
-        self._stream.flush()
+        # The writer closes a chunk by size only; closing it by time as well (Writer.flush: the
+        # chunk in progress, then the stream) is what keeps a killed recorder's file readable up
+        # to the last flush.
+        self._writer.flush()
         self._flushed_at = time.monotonic()
 
     def close(self) -> None:
