@@ -1,12 +1,16 @@
 """A Foxglove layout for a team's recordings and live feed, built with the Foxglove SDK's
 :mod:`foxglove.layouts`::
 
-    python -m dashboard.layout [--team T] [--robots N] [-o FILE]
+    python -m dashboard.layout [--team T] [--robots N] -o FILE
+    python -m dashboard.layout --recording RUN.mcap -o FILE
 
-writes the layout of team ``T`` (default ``paper``) of ``N`` robots (default 4) to ``FILE``
-(default :data:`COMMITTED`, the repository's layout of the paper's team, which a test keeps
-equal to what this writes). Import it in Foxglove (Layouts, Import from file) and open a
-recording (``heft record``, ``heft run --transport zenoh``, ``heft demo``). It shows:
+writes the layout of team ``T`` (default ``paper``) of ``N`` robots (default 4), or of the
+team a recording holds, to ``FILE``. :data:`COMMITTED` is the repository's layout of the paper's
+team (the deployed robots' ``team = "paper"``), which a test keeps equal to what this writes
+with ``-o deploy/foxglove/heft-layout.json``. A simulated run's team is named after its scenario
+and its launcher's process (``paper-4242``): ``--recording`` makes its layout. Import it in
+Foxglove (Layouts, Import from file) and open a recording (``heft record``, ``heft run
+--transport zenoh``, ``heft demo``). It shows:
 
 - the 3D panel: the load's scene (:mod:`dashboard.scene`) seen from above in the world frame,
   following the load frame's position;
@@ -31,7 +35,7 @@ from pathlib import Path
 import foxglove.layouts as fl
 
 from agent.platform.config import MAX_ROBOTS
-from agent.platform.protocol import Keys, Phase
+from agent.platform.protocol import Estimates, Keys, LoadGeometry, Phase
 from dashboard.scene import (
     LOAD,
     PHASE_COLOURS,
@@ -151,6 +155,22 @@ def layout_json(team: str = DEFAULT_TEAM, robots: int = DEFAULT_ROBOTS) -> str:
     )
 
 
+def recorded_team(path: Path) -> tuple[str, int]:
+    """The team a recording holds and how many robots it has (the load geometry's ``n``, else
+    the highest robot id with estimates); :class:`~dashboard.replay.RecordingError` if it is
+    not a team's recording."""
+    from dashboard.replay import Recording
+
+    recording = Recording(path)
+    team = recording.header()
+    robots = 0
+    for recorded in recording.messages({LoadGeometry, Estimates}):
+        if isinstance(recorded.message, LoadGeometry):
+            return team, recorded.message.n
+        robots = max(robots, recorded.message.robot)
+    return team, robots or DEFAULT_ROBOTS
+
+
 class _Usage(Exception):
     """Bad input: one line, exit status 2."""
 
@@ -165,17 +185,23 @@ def _parser() -> argparse.ArgumentParser:
         prog="python -m dashboard.layout",
         description="Write the Foxglove layout of a team's recordings and live feed.",
     )
-    parser.add_argument("--team", default=DEFAULT_TEAM, help="the team (default: paper)")
+    parser.add_argument("--team", help="the team (default: paper)")
     parser.add_argument(
-        "--robots", default=str(DEFAULT_ROBOTS), help=f"how many robots, 1 to {MAX_ROBOTS}"
+        "--robots", help=f"how many robots, 1 to {MAX_ROBOTS} (default: {DEFAULT_ROBOTS})"
+    )
+    parser.add_argument(
+        "--recording",
+        type=Path,
+        metavar="RUN.mcap",
+        help="the team and robots of this recording (instead of --team and --robots)",
     )
     parser.add_argument(
         "-o",
         "--output",
         type=Path,
-        default=COMMITTED,
+        required=True,
         metavar="FILE",
-        help="where to write it (default: deploy/foxglove/heft-layout.json)",
+        help="where to write it (the repository's: deploy/foxglove/heft-layout.json)",
     )
     return parser
 
@@ -186,13 +212,26 @@ def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     try:
         args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-        try:
-            Keys(args.team)
-        except ValueError as err:
-            raise _Usage(f"--team: {err}") from None
-        if not (args.robots.isdecimal() and 1 <= int(args.robots) <= MAX_ROBOTS):
-            raise _Usage(f"--robots: expected 1 to {MAX_ROBOTS}, got {args.robots!r}")
-        text = layout_json(args.team, int(args.robots))
+        if args.recording is not None:
+            if args.team is not None or args.robots is not None:
+                raise _Usage("--recording names the team and its robots: not with --team, --robots")
+            from dashboard.replay import RecordingError
+
+            try:
+                team, robots = recorded_team(args.recording)
+            except RecordingError as err:
+                raise _Usage(f"--recording: {err}") from None
+        else:
+            team = DEFAULT_TEAM if args.team is None else args.team
+            robots = str(DEFAULT_ROBOTS) if args.robots is None else args.robots
+            try:
+                Keys(team)
+            except ValueError as err:
+                raise _Usage(f"--team: {err}") from None
+            if not (robots.isdecimal() and 1 <= int(robots) <= MAX_ROBOTS):
+                raise _Usage(f"--robots: expected 1 to {MAX_ROBOTS}, got {robots!r}")
+            robots = int(robots)
+        text = layout_json(team, robots)
         try:
             args.output.parent.mkdir(parents=True, exist_ok=True)
             args.output.write_text(text, encoding="utf-8")

@@ -20,7 +20,7 @@ def test_the_committed_layout_is_what_the_command_writes(tmp_path: Path, capsys)
     assert main(["-o", str(written)]) == 0
     assert capsys.readouterr().out == f"wrote {written}\n"
     assert COMMITTED.read_text(encoding="utf-8") == written.read_text(encoding="utf-8"), (
-        f"{COMMITTED} is out of date: run python -m dashboard.layout"
+        f"{COMMITTED} is out of date: run python -m dashboard.layout -o {COMMITTED}"
     )
     assert written.read_text(encoding="utf-8") == layout_json("paper", 4)
 
@@ -106,9 +106,28 @@ def test_another_team_gets_its_own_topics(tmp_path: Path) -> None:
     assert list(three_d["topics"]) == ["heft/lab.2/scene"]
 
 
+def test_a_recordings_layout_names_its_team_and_robots(tmp_path: Path, capsys) -> None:
+    from simulator.inprocess import run_inprocess
+    from simulator.scenario import load_scenario
+    from tests.helpers.paths import PAPER
+
+    scenario = load_scenario(PAPER)
+    path = tmp_path / "run.mcap"
+    record_run(path, scenario, run_inprocess(scenario), team="paper-4242")
+    out = tmp_path / "run-layout.json"
+    assert main(["--recording", str(path), "-o", str(out)]) == 0
+    assert out.read_text(encoding="utf-8") == layout_json("paper-4242", 4)
+    assert main(["--recording", str(tmp_path / "none.mcap"), "-o", str(out)]) == 2
+    assert "--recording: " in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     ("argv", "says"),
     [
+        (
+            ["--recording", "x.mcap", "--team", "lab"],
+            "--recording names the team and its robots: not with --team, --robots",
+        ),
         (["--robots", "0"], "--robots: expected 1 to 32, got '0'"),
         (["--robots", "x"], "--robots: expected 1 to 32, got 'x'"),
         (["--team", "a/b"], "--team: team name 'a/b' must be non-empty without / * $ ? #"),
