@@ -2,11 +2,12 @@
 
 :class:`RunCompanion` is used in three moments of a run:
 
-1. before it (:meth:`RunCompanion.open`): the dashboard is served, and its URL printed, before
-   any process starts;
+1. before it (:meth:`RunCompanion.open`): the dashboard is served (and, if asked, the team live
+   to Foxglove on its ``/foxglove`` route), and its URLs printed, before any process starts;
 2. once the run's router is up, before the plant and the agents start
    (:meth:`RunCompanion.on_ready`, given the router's endpoint and the team's name): the
-   recorder and the dashboard subscribe, so nothing of the run is missed;
+   recorder and the dashboard (with Foxglove's live server) subscribe, so nothing of the run
+   is missed;
 3. after it (:meth:`RunCompanion.run_over`): the recording is closed (summary written) and
    offered to the page for replay; the page keeps what it showed.
 """
@@ -46,15 +47,20 @@ class RunCompanion:
         port: int = DEFAULT_PORT,
         token: str | None = None,
         stream: TextIO | None = None,
+        foxglove: bool = False,
     ) -> RunCompanion:
         """Serve the dashboard (if ``dashboard``) and print ``dashboard: URL`` to ``stream``;
+        with ``foxglove`` the dashboard serves the run live to Foxglove too (as ``heft dashboard
+        --foxglove``: behind the same token) and prints ``foxglove: URL`` next.
         :class:`~dashboard.server.ServeError` if its port is taken. The load's outline comes
         from the run's plant, as the rest of its messages."""
         display = None
         if dashboard:
-            display = Display.open(None, host, port, token, recording=record)
+            display = Display.open(None, host, port, token, recording=record, foxglove=foxglove)
             if stream is not None:
                 print(f"dashboard: {display.url}", file=stream, flush=True)
+                if display.foxglove_url is not None:
+                    print(f"foxglove: {display.foxglove_url}", file=stream, flush=True)
         return cls(record, display)
 
     def on_ready(self, router: str, team: str) -> None:

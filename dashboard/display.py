@@ -8,8 +8,12 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from agent.platform.zenoh_session import ZenohSettings
+
+if TYPE_CHECKING:
+    from dashboard.feed import Sink
 
 LOG = logging.getLogger("heft.dashboard")
 DEFAULT_PORT = 8765
@@ -21,7 +25,9 @@ class Display:
     live feed once :meth:`watch` is called. ``heft dashboard`` is one; ``heft demo`` can
     hold one beside its run. With :attr:`foxglove` (a
     :class:`~dashboard.foxglove_live.LiveFoxglove`), the feed takes every key of the team and
-    Foxglove connects to :attr:`foxglove_url`."""
+    Foxglove connects to :attr:`foxglove_url`. A display opened before its team is known
+    (``heft demo``'s) is given it by :meth:`watch`, or by the recording that feeds it
+    (:class:`TeamRecording`)."""
 
     def __init__(self, hub, server, url: str, foxglove=None, foxglove_url: str | None = None):
         self.hub = hub
@@ -42,7 +48,8 @@ class Display:
         foxglove: bool = False,
     ) -> Display:
         """Serve the page on ``host:port`` (:class:`~dashboard.server.ServeError` if taken);
-        with ``foxglove``, team ``team`` live to Foxglove on ``/foxglove`` too."""
+        with ``foxglove``, team ``team`` (or the one watched later) live to Foxglove on
+        ``/foxglove`` too."""
         from dashboard.app import AppSettings, create_app, missing_vendor
         from dashboard.hub import Hub
         from dashboard.server import Server
@@ -56,9 +63,7 @@ class Display:
         if foxglove:
             from dashboard.foxglove_live import LiveFoxglove
 
-            if not team:
-                raise ValueError("Foxglove is served live for a team: name it")
-            live = LiveFoxglove(team)
+            live = LiveFoxglove(team or None)
         settings = AppSettings(token=token, foxglove=None if live is None else live.url)
         hub = Hub(team or "", recording=recording)
         try:
@@ -77,15 +82,20 @@ class Display:
         from dashboard.feed import LiveFeed, everything
 
         keys = Keys(team or self.hub.team)
-        self.hub.team = keys.team
-        self.hub.state.team = keys.team
-        sinks, subscriptions = [self.hub.ingest_batch], None
-        if self.foxglove is not None:
-            sinks.append(self.foxglove.ingest_batch)
-            subscriptions = everything(keys)
+        subscriptions = None if self.foxglove is None else everything(keys)
         self.feed = LiveFeed(
-            settings, keys, sinks, subscriptions, liveliness=self.hub.liveliness
+            settings, keys, self.follow(keys.team), subscriptions, liveliness=self.hub.liveliness
         ).start()
+
+    def follow(self, team: str) -> list[Sink]:
+        """Show team ``team`` (on the page, and to Foxglove if served): the sinks of a feed of
+        its messages (a feed for Foxglove takes every key of the team)."""
+        self.hub.team = self.hub.state.team = team
+        sinks = [self.hub.ingest_batch]
+        if self.foxglove is not None:
+            self.foxglove.follow(team)
+            sinks.append(self.foxglove.ingest_batch)
+        return sinks
 
     def close(self) -> None:
         if self.feed is not None:
@@ -115,7 +125,8 @@ class TeamRecording:
     ) -> TeamRecording:
         """Start recording; :class:`~agent.platform.zenoh_session.SessionError` if Zenoh cannot (the
         file is created only once the session is open). With ``display``, the same decoded
-        messages feed its page too (one subscription, each message decoded once)."""
+        messages feed its page, and Foxglove if it serves it, too (one subscription, each
+        message decoded once)."""
         from agent.platform.protocol import Keys
         from agent.platform.zenoh_session import open_session
         from dashboard.feed import LiveFeed, everything
@@ -135,8 +146,7 @@ class TeamRecording:
 
         sinks, liveliness = [write], None
         if display is not None:
-            display.hub.team = display.hub.state.team = keys.team
-            sinks.append(display.hub.ingest_batch)
+            sinks += display.follow(keys.team)
             liveliness = display.hub.liveliness
         feed = LiveFeed(settings, keys, sinks, everything(keys), liveliness, session=session)
         try:

@@ -164,7 +164,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _companion(args: argparse.Namespace, scenario: Scenario):
     """The run's recording (over Zenoh, unless ``--no-record``) and, for ``heft demo``, its
-    dashboard, served from now on; None when there is neither."""
+    dashboard (with ``--foxglove``, serving the run live to Foxglove too), served from now on;
+    None when there is neither."""
     dashboard = getattr(args, "dashboard", False)
     if args.dashboard_port is not None:
         check_port("--dashboard-port", args.dashboard_port)
@@ -183,7 +184,13 @@ def _companion(args: argparse.Namespace, scenario: Scenario):
     from dashboard.server import ServeError
 
     try:
-        return RunCompanion.open(record, dashboard, port=args.dashboard_port, stream=sys.stdout)
+        return RunCompanion.open(
+            record,
+            dashboard,
+            port=args.dashboard_port,
+            stream=sys.stdout,
+            foxglove=getattr(args, "foxglove", False),
+        )
     except ServeError as err:  # a busy port: exit status 4, as an unreachable router
         raise SessionError(str(err)) from None
 
@@ -739,7 +746,18 @@ def _add_demo(commands: argparse._SubParsersAction) -> None:
             "'dashboard: URL' first: the page shows the team live; prints the table of\n"
             "estimates against truth at the end, then keeps the dashboard up (the run can be\n"
             "replayed there from its recording) until Ctrl-C, unless --no-wait.\n\n"
-            "Exit status: 0 converged, 1 not converged, 2 bad arguments, 130 interrupted."
+            "With --foxglove the dashboard also serves the run live to Foxglove, as heft\n"
+            "dashboard --foxglove does: it prints 'foxglove: ws://127.0.0.1:PORT/foxglove'\n"
+            "next; in Foxglove, open a connection, choose 'Foxglove WebSocket' and give that\n"
+            "URL. The topics are a recording's (the scene, the frames, every message of the\n"
+            "team), at the team's rate, from the run's start to its end.\n\n"
+            "Exit status: 0 converged, 1 not converged, 2 bad arguments, 4 the dashboard's\n"
+            "port is busy, 130 interrupted."
+        ),
+        epilog=(
+            "examples:\n"
+            "  heft demo --out results.json --plot plots\n"
+            "  heft demo --foxglove --dashboard-port 0 --no-record"
         ),
     )
     _add_output_options(demo)
@@ -750,6 +768,11 @@ def _add_demo(commands: argparse._SubParsersAction) -> None:
         default=8765,
         metavar="PORT",
         help="serve the dashboard on 127.0.0.1:PORT, 0 for any free one (default: 8765)",
+    )
+    demo.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="also serve the run live to Foxglove on ws://127.0.0.1:PORT/foxglove (printed)",
     )
     demo.add_argument(
         "--no-wait",

@@ -161,6 +161,25 @@ def test_a_client_is_disconnected_when_the_dashboard_closes() -> None:
             client.ws.recv(timeout=20)
 
 
+def test_a_display_opened_before_its_team_is_known_serves_it_once_named() -> None:
+    display = Display.open(None, port=0, foxglove=True)  # heft demo's: its run names the team
+    try:
+        live = display.foxglove
+        live.ingest_batch(batch(0))
+        assert live.channels == {} and live.messages == 0  # no team: nothing to name them after
+        sinks = display.follow(TEAM)
+        assert sinks == [display.hub.ingest_batch, live.ingest_batch]
+        assert display.hub.team == display.hub.state.team == TEAM
+        live.ingest_batch(batch(1))
+        assert {KEYS.truth(), f"heft/{TEAM}/scene", f"heft/{TEAM}/transforms"} <= set(live.channels)
+        assert live.messages > len(batch(1))
+        display.follow(TEAM)  # the same team again: nothing changes
+        with pytest.raises(ValueError, match="not 'other'"):
+            display.follow("other")
+    finally:
+        display.close()
+
+
 def test_without_foxglove_there_is_no_foxglove_route() -> None:
     display = Display.open(TEAM, port=0)
     try:
