@@ -1,20 +1,26 @@
 """Foxglove's readers in the tests: its own JSON-schema parser (from the npm package
 ``@foxglove/studio-base``, installed by ``make``), run in node over a recording's schemas
 (tests/helpers/foxglove_parser.cjs), and its protobuf messages read back with the schema each
-channel carries (a FileDescriptorSet, as the SDK's ``get_schema()`` gives it)."""
+channel carries (a FileDescriptorSet, as the SDK's ``get_schema()`` gives it), their poses
+taken to the world frame."""
 
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import subprocess
 from pathlib import Path
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
+from agent.platform.geometry import rotate
+
 NODE = shutil.which("node")
 """The node executable, None if it is not installed (the parser's tests are then skipped)."""
 HARNESS = Path(__file__).with_name("foxglove_parser.cjs")
+TOLERANCE = 1e-9
+"""How far a point drawn may be from where the messages put it (m, rad): rounding only."""
 
 
 def foxglove_parse(schemas: dict[str, dict]) -> dict[str, dict]:
@@ -43,6 +49,26 @@ def decoder(schema_name: str, data: bytes):
     for file in descriptor_pb2.FileDescriptorSet.FromString(data).file:
         pool.Add(file)
     return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema_name))
+
+
+def turn(q) -> float:
+    """The turn about ``z`` of a quaternion that is one (a decoded ``foxglove.Quaternion``)."""
+    assert abs(q.x) < TOLERANCE and abs(q.y) < TOLERANCE
+    return 2.0 * math.atan2(q.z, q.w)
+
+
+def in_world(frame, pose, x: float = 0.0, y: float = 0.0) -> tuple[float, float]:
+    """Point ``(x, y)`` of ``pose`` (a decoded ``foxglove.Pose`` in the load frame) in the
+    world frame, through ``frame`` (a decoded ``foxglove.FrameTransform`` world → load)."""
+    local = rotate((x, y), turn(pose.orientation))
+    local = (local[0] + pose.position.x, local[1] + pose.position.y)
+    turned = rotate(local, turn(frame.rotation))
+    return (turned[0] + frame.translation.x, turned[1] + frame.translation.y)
+
+
+def close(a, b, tol: float = TOLERANCE) -> bool:
+    """Whether points ``a`` and ``b`` agree to ``tol`` in every coordinate."""
+    return all(abs(p - q) <= tol for p, q in zip(a, b, strict=True))
 
 
 def check_recording(path: str | Path) -> list[dict]:

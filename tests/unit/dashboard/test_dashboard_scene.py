@@ -11,7 +11,6 @@ from dataclasses import replace
 
 import pytest
 
-from agent.platform.geometry import rotate
 from agent.platform.protocol import (
     Command,
     Estimates,
@@ -26,13 +25,12 @@ from dashboard.topics import Outgoing, Topics
 from simulator.inprocess import make_agents
 from simulator.plant import Plant
 from simulator.scenario import load_scenario
-from tests.helpers.foxglove import decoder
+from tests.helpers.foxglove import TOLERANCE, close, decoder, in_world, turn
 from tests.helpers.paths import PAPER, ROOT
 
 PICTURE = ROOT / "docs" / "images" / "foxglove-scene.png"
 INSTANT_S = 7.0
 """The instant drawn: the paper's team pushing, every estimate there."""
-TOLERANCE = 1e-9
 
 
 # ------------------------------------------------------------------------------ decoding
@@ -48,26 +46,8 @@ def decode_message(message):
     return decoder(schema.name, schema.data).FromString(message.encode())
 
 
-def _angle(q) -> float:
-    """The turn about ``z`` of a quaternion that is one."""
-    assert abs(q.x) < TOLERANCE and abs(q.y) < TOLERANCE
-    return 2.0 * math.atan2(q.z, q.w)
-
-
-def _in_world(frame, pose, x: float = 0.0, y: float = 0.0) -> tuple[float, float]:
-    """Point ``(x, y)`` of ``pose`` in the load frame, in W through ``frame``."""
-    local = rotate((x, y), _angle(pose.orientation))
-    local = (local[0] + pose.position.x, local[1] + pose.position.y)
-    turned = rotate(local, _angle(frame.rotation))
-    return (turned[0] + frame.translation.x, turned[1] + frame.translation.y)
-
-
 def _heading(frame, pose) -> float:
-    return _angle(frame.rotation) + _angle(pose.orientation)
-
-
-def _close(a, b, tol: float = TOLERANCE) -> bool:
-    return all(abs(p - q) <= tol for p, q in zip(a, b, strict=True))
+    return turn(frame.rotation) + turn(pose.orientation)
 
 
 # ------------------------------------------------------------------------------ the run
@@ -125,8 +105,8 @@ def test_one_instants_scene_and_frame_are_the_truths_and_the_commands(recorded) 
 
     # The frame: world → load at the truth's pose, stamped with the instant.
     assert (frame.parent_frame_id, frame.child_frame_id) == ("world", "load")
-    assert _close((frame.translation.x, frame.translation.y), truth.com_position)
-    assert abs(math.remainder(_angle(frame.rotation) - truth.angle, 2 * math.pi)) < TOLERANCE
+    assert close((frame.translation.x, frame.translation.y), truth.com_position)
+    assert abs(math.remainder(turn(frame.rotation) - truth.angle, 2 * math.pi)) < TOLERANCE
     assert frame.timestamp.seconds * 10**9 + frame.timestamp.nanos == instant_ns
 
     # The update replaces the whole scene; every entity is in the load frame, locked to it.
@@ -146,15 +126,15 @@ def test_one_instants_scene_and_frame_are_the_truths_and_the_commands(recorded) 
 
     # The outline's vertices, taken to W by the frame, are where the truth puts the polygon.
     outline = entities["load"].lines[0]
-    world = [_in_world(frame, outline.pose, p.x, p.y) for p in outline.points]
+    world = [in_world(frame, outline.pose, p.x, p.y) for p in outline.points]
     expected = scenario.load_geometry().world_outline(truth.com_position, truth.angle)
     assert len(world) == len(expected) >= 3
-    assert all(_close(p, q) for p, q in zip(world, expected))
+    assert all(close(p, q) for p, q in zip(world, expected))
 
     # The COM and the contacts.
-    assert _close(_in_world(frame, entities["com"].spheres[0].pose), truth.com_position)
+    assert close(in_world(frame, entities["com"].spheres[0].pose), truth.com_position)
     for i, contact in enumerate(truth.contacts, start=1):
-        assert _close(_in_world(frame, entities[f"contact/{i}"].spheres[0].pose), contact)
+        assert close(in_world(frame, entities[f"contact/{i}"].spheres[0].pose), contact)
         assert entities[f"contact/{i}"].texts[0].text == str(i)
 
     # The arrows: from each contact along its robot's command, in proportion to it, the
@@ -165,7 +145,7 @@ def test_one_instants_scene_and_frame_are_the_truths_and_the_commands(recorded) 
     assert largest > 0.0
     for i, command in forces.items():
         arrow = entities[f"force/{i}"].arrows[0]
-        assert _close(_in_world(frame, arrow.pose), truth.contacts[i - 1])
+        assert close(in_world(frame, arrow.pose), truth.contacts[i - 1])
         heading = _heading(frame, arrow.pose)
         assert abs(math.remainder(heading - math.atan2(*command.force[::-1]), 2 * math.pi)) < 1e-9
         length = arrow.shaft_length + arrow.head_length
@@ -178,23 +158,23 @@ def test_one_instants_scene_and_frame_are_the_truths_and_the_commands(recorded) 
     for i, est in ests.items():
         contact = truth.contacts[i - 1]
         ring = entities[f"com_estimate/{i}"].lines[0]
-        points = [_in_world(frame, ring.pose, p.x, p.y) for p in ring.points]
+        points = [in_world(frame, ring.pose, p.x, p.y) for p in ring.points]
         centre = tuple(sum(c) / len(points) for c in zip(*points))
         expected_com = (contact[0] + est.contact_to_com[0], contact[1] + est.contact_to_com[1])
-        assert _close(centre, expected_com, 1e-9)
+        assert close(centre, expected_com, 1e-9)
         spheres = entities[f"geometry/{i}"].spheres
-        placed = [_in_world(frame, s.pose) for s in spheres]
+        placed = [in_world(frame, s.pose) for s in spheres]
         wanted = [
             (contact[0] - z[0], contact[1] - z[1])
             for _, z in sorted(est.relative_positions.items())
         ]
         assert len(placed) == len(wanted) == len(est.relative_positions) >= 1  # its neighbours
-        assert all(_close(p, q, 1e-9) for p, q in zip(placed, wanted))
+        assert all(close(p, q, 1e-9) for p, q in zip(placed, wanted))
         cross = entities[f"geometry/{i}"].lines[0]
-        ends = [_in_world(frame, cross.pose, p.x, p.y) for p in cross.points]
+        ends = [in_world(frame, cross.pose, p.x, p.y) for p in cross.points]
         centre = tuple(sum(c) / len(ends) for c in zip(*ends))
         g = est.centroid_offset
-        assert _close(centre, (contact[0] - g[0], contact[1] - g[1]), 1e-9)
+        assert close(centre, (contact[0] - g[0], contact[1] - g[1]), 1e-9)
         # The estimates are good by now: each robot's COM within 5 cm of the truth.
         assert math.dist(expected_com, truth.com_position) < 0.05
 
@@ -340,7 +320,7 @@ def _render(update, frame, truth: Truth, t: float) -> None:
     ax.set_facecolor("#15171c")
     for entity in update.entities:
         for line in entity.lines:
-            points = [_in_world(frame, line.pose, p.x, p.y) for p in line.points]
+            points = [in_world(frame, line.pose, p.x, p.y) for p in line.points]
             if line.type == 1:  # LineLoop
                 points.append(points[0])
             if line.type == 2:  # LineList
@@ -349,7 +329,7 @@ def _render(update, frame, truth: Truth, t: float) -> None:
             else:
                 ax.plot(*zip(*points), color=rgba(line.color), lw=line.thickness * 0.8)
         for arrow in entity.arrows:
-            x, y = _in_world(frame, arrow.pose)
+            x, y = in_world(frame, arrow.pose)
             heading = _heading(frame, arrow.pose)
             length = arrow.shaft_length + arrow.head_length
             ax.annotate(
@@ -359,10 +339,10 @@ def _render(update, frame, truth: Truth, t: float) -> None:
                 arrowprops={"arrowstyle": "-|>", "color": rgba(arrow.color), "lw": 2},
             )
         for sphere in entity.spheres:
-            x, y = _in_world(frame, sphere.pose)
+            x, y = in_world(frame, sphere.pose)
             ax.add_patch(plt.Circle((x, y), sphere.size.x / 2, color=rgba(sphere.color), zorder=3))
         for text in entity.texts:
-            x, y = _in_world(frame, text.pose)
+            x, y = in_world(frame, text.pose)
             ax.text(x, y, text.text, color=rgba(text.color), ha="center", va="bottom",
                     fontsize=10, fontweight="bold", zorder=4)  # fmt: skip
     ax.set_aspect("equal")
