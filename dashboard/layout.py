@@ -6,9 +6,10 @@
 
 writes the layout of team ``T`` (default ``paper``) of ``N`` robots (default 4), or of the
 team a recording holds, to ``FILE``. :data:`COMMITTED` is the repository's layout of the paper's
-team (the deployed robots' ``team = "paper"``), which a test keeps equal to what this writes
-with ``-o deploy/foxglove/heft-layout.json``. A simulated run's team is named after its scenario
-and its launcher's process (``paper-4242``): ``--recording`` makes its layout. Import it in
+team (the deployed robots' ``team = "paper"``, and ``heft demo``'s: a simulated run's team is
+named after its scenario), which a test keeps equal to what this writes with
+``-o deploy/foxglove/heft-layout.json``; ``--recording`` makes the layout of another scenario's
+or team's recording. Import it in
 Foxglove (Layouts, Import from file) and open a recording (``heft record``, ``heft run
 --transport zenoh``, ``heft demo``). It shows:
 

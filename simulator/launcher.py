@@ -461,7 +461,10 @@ def _child_env() -> dict[str, str]:
 
 
 def _team_name(scenario: Scenario) -> str:
-    return re.sub(r"[^A-Za-z0-9_-]", "-", scenario.name)[:40] + f"-{os.getpid()}"
+    """The run's team: the scenario's name (``paper``), as a deployed team's, so that its
+    recordings open with the same Foxglove layout; each run has a router of its own, so two
+    runs of one scenario never hear each other."""
+    return re.sub(r"[^A-Za-z0-9_-]", "-", scenario.name)[:40]
 
 
 class RunFailed(Exception):

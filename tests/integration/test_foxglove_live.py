@@ -179,7 +179,7 @@ def test_foxglove_follows_heft_demo_live(tmp_path: Path) -> None:
         )
     try:
         url = foxglove_url(process)
-        keys = Keys(f"paper-{process.pid}")  # the launcher names the team after its process
+        keys = Keys("paper")  # the launcher names the team after its scenario
         drawn = SceneTopics(keys.team)
         kinds = {keys.truth(): Truth}
         kinds |= {keys.force(i): Command for i in robots}
