@@ -40,7 +40,12 @@ for others. ``publish_time`` stays the wall clock when each message was recorded
 
 from __future__ import annotations
 
-from agent.platform.protocol import Clock, LoadGeometry, PlantStatus, Truth
+from agent.platform.protocol import BridgeStatus, Clock, LoadGeometry, PlantStatus, Truth
+from dashboard.state import TICK_SLACK
+
+FUTURE_NS = 60 * 10**9
+"""How far ahead of the newest ``log_time`` given a message's instant may be (ns): one further
+ahead takes the newest."""
 
 PLANT_KINDS = (Clock, Truth, PlantStatus, LoadGeometry)
 """What only a plant publishes: the first message of a recording being one of these puts it on
@@ -64,15 +69,29 @@ class Timeline:
         tick 0 is at 0."""
         self.newest_ns: int | None = None
         """The newest ``log_time`` given (what a message without an instant takes)."""
+        self.latest_tick = -1
+        """The newest tick heard within the window (a bridge's status's ticks are its bus's,
+        not counted)."""
         self._on_wall = False
 
     def log_time_ns(self, message: object, received_ns: int) -> int | None:
         """``message``'s ``log_time`` (ns): ``origin + instant``; received at
         ``received_ns`` (ns since the epoch). None for a message without an instant while the
         origin is not fixed: the caller holds it until it is (the next message that fixes it,
-        or :meth:`on_wall`), then asks again."""
-        self._learn(message)
-        instant = self._instant_s(message)
+        or :meth:`on_wall`), then asks again. A message outside the window
+        (:meth:`in_window`) has no instant and teaches nothing."""
+        if self.in_window(message):
+            self._learn(message)
+            instant = self._instant_s(message)
+            tick = getattr(message, "tick", None)
+            if (
+                tick is not None
+                and tick > self.latest_tick
+                and not isinstance(message, BridgeStatus)
+            ):
+                self.latest_tick = tick
+        else:
+            instant = None
         if self.origin_ns is None:
             if isinstance(message, PLANT_KINDS) and not self._on_wall:
                 self.origin_ns = 0
@@ -84,7 +103,18 @@ class Timeline:
                 return None
         if instant is None:
             return self._given(self.origin_ns if self.newest_ns is None else self.newest_ns)
-        return self._given(max(0, self.origin_ns + round(instant * 1e9)))
+        stamp = max(0, self.origin_ns + round(instant * 1e9))
+        if self.newest_ns is not None and stamp > self.newest_ns + FUTURE_NS:
+            return self.newest_ns  # an instant far ahead of the team's: not believed
+        return self._given(stamp)
+
+    def in_window(self, message: object) -> bool:
+        """Whether ``message``'s tick (if it has one) is within :data:`~dashboard.state.
+        TICK_SLACK` of the newest tick heard, as the dashboard's page takes it: a message from
+        far ahead (forged, or a robot gone wrong) is recorded, but stamped with the newest
+        instant, and teaches the clock nothing and Foxglove's scene nothing."""
+        tick = getattr(message, "tick", None)
+        return tick is None or self.latest_tick < 0 or tick <= self.latest_tick + TICK_SLACK
 
     def on_wall(self) -> None:
         """No plant spoke first: from now on, a message without an instant before the origin

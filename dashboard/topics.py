@@ -14,6 +14,7 @@ moment it arrived.
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import dataclass
 
 from dashboard.channels import json_schema, record_bytes
@@ -42,6 +43,7 @@ class Outgoing:
     log_time_ns: int
 
 
+LOG = logging.getLogger("heft.dashboard")
 HOLD_S = 2.0
 """The longest a message without an instant waits for the team's clock to be known (wall-clock
 seconds, counted from the first one held); :data:`HOLD_LIMIT` messages at most."""
@@ -55,6 +57,8 @@ class Topics:
         self.team = team
         self.scene = Scene(team)
         self.timeline = Timeline()
+        self.failures = 0
+        """Messages whose drawing failed (recorded all the same)."""
         self._held: list[tuple[str, object, int]] = []
         """What arrived before the team's clock was known: ``(key, message, arrival)``."""
         self._schemas: dict[type, SchemaSpec] = {}
@@ -109,7 +113,16 @@ class Topics:
     def _items(self, key: str, message: object, log_time_ns: int) -> list[Outgoing]:
         data = record_bytes(message)
         record = Outgoing(key, self.schema(type(message)), "json", data, log_time_ns)
-        return [record, *self._drawn(message, log_time_ns)]
+        if not self.timeline.in_window(message):
+            return [record]  # recorded as it came; Foxglove's panels draw nothing of it
+        try:
+            drawn = self._drawn(message, log_time_ns)
+        except Exception:  # noqa: BLE001 - what is drawn of one message never costs its record
+            self.failures += 1
+            if self.failures <= 10:
+                LOG.exception("%s: what Foxglove draws of a %s failed", key, type(message).__name__)
+            return [record]
+        return [record, *drawn]
 
     def _drawn(self, message: object, log_time_ns: int) -> list[Outgoing]:
         return [

@@ -16,6 +16,7 @@ from agent.platform.protocol import (
     Clock,
     Command,
     Control,
+    DecodeError,
     Estimates,
     Keys,
     LoadGeometry,
@@ -26,10 +27,12 @@ from agent.platform.protocol import (
     Status,
     Truth,
 )
-from dashboard.channels import ROBOT_KINDS, TEAM_KINDS
+from dashboard.channels import ROBOT_KINDS, TEAM_KINDS, decode_on
 from dashboard.recorder import Recorder
 from dashboard.timeline import Timeline
 from dashboard.topics import HOLD_S, Topics
+from tests.helpers.forged import KEYS, forged_messages
+from tests.helpers.foxglove import decoder
 
 PERIOD = 0.01
 WALL = 1_800_000_000_000_000_000
@@ -243,3 +246,53 @@ def test_a_recorder_closing_writes_what_it_held(tmp_path: Path) -> None:
     with open(path, "rb") as stream:
         read = [(c.topic, m.log_time) for _, c, m in make_reader(stream).iter_messages()]
     assert read == [(keys.control(), WALL)]
+
+
+def test_messages_from_far_ahead_are_recorded_but_move_neither_clock_nor_scene(
+    tmp_path: Path,
+) -> None:
+    """A robot's certificate in a forger's hands: every forged message that decodes (ticks far
+    ahead, 2**62 among them) is recorded, stamped with the newest instant; the team's own
+    messages around them keep their instants, nothing of theirs is lost, and the scene still
+    draws the team's own commands."""
+    rng = random.Random(7)
+    keys = KEYS
+    path = tmp_path / "forged.mcap"
+    sent, forged = [], 0
+    with Recorder(path, keys.team) as recorder:
+        recorder.write(keys.geometry(), GEOMETRY, WALL)
+        for k in range(200):
+            for message in tick_traffic(k):
+                recorder.write(_key(keys, message), message, WALL + k)
+                sent.append(message)
+            if k >= 20:
+                for key, payload in forged_messages(rng, 2, k):
+                    try:
+                        message = decode_on(keys, key, payload)
+                    except DecodeError:
+                        continue
+                    recorder.write(key, message, WALL + k)
+                    forged += 1
+    assert forged > 100
+    assert recorder.topics.failures == 0
+    with open(path, "rb") as stream:
+        read = [
+            (c.topic, m.log_time, m.data, s.name)
+            for s, c, m in make_reader(stream).iter_messages(log_time_order=False)
+        ]
+    records = [r for r in read if r[3].startswith("heft.")]
+    assert len(records) == 1 + len(sent) + forged  # nothing lost, nothing dropped
+    assert max(t for _, t, _, _ in read) == round(199 * PERIOD * 1e9)  # never ahead of the team
+    scenes = [r for r in read if r[3] == "foxglove.SceneUpdate"]
+    last = decoder("foxglove.SceneUpdate", _schema(path, "foxglove.SceneUpdate")).FromString(
+        scenes[-1][2]
+    )
+    arrows = [e for e in last.entities if e.id.startswith("force/")]
+    forces = [float({m.key: m.value for m in a.metadata}["x"]) for a in arrows]
+    assert forces == [1.0, 1.0]  # the team's commands, not the forged 10 N of far-ahead ticks
+
+
+def _schema(path: Path, name: str) -> bytes:
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    return next(s.data for s in summary.schemas.values() if s.name == name)
