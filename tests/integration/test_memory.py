@@ -12,15 +12,17 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import multiprocessing
+import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from simulator.launcher import run_zenoh
 from simulator.scenario import load_scenario
-from tests.helpers.paths import PAPER
+from tests.helpers.paths import PAPER, ROOT
 
 MIB = 1 << 20
 SIMULATED_S = 240.0
@@ -59,9 +61,10 @@ def _processes() -> dict[str, int]:
     return found
 
 
-def _long_run(queue) -> None:
-    """In a process of its own: the long run, with every process's RSS sampled every
-    ``EARLY_S`` of simulated time; puts ``(samples, converged, simulated seconds)``."""
+def _long_run() -> None:
+    """``python -m tests.integration.test_memory``, the launcher's process: the long run, with
+    every process's RSS sampled every ``EARLY_S`` of simulated time; prints ``{"samples":
+    {time: {process: RSS}}, "converged": …, "sim_time_s": …}`` as JSON."""
     paper = load_scenario(PAPER)
     scenario = dataclasses.replace(
         paper,
@@ -76,23 +79,24 @@ def _long_run(queue) -> None:
     outcome = run_zenoh(
         scenario, progress=progress, progress_every_s=EARLY_S, log_stream=io.StringIO()
     )
-    queue.put((samples, outcome.converged, outcome.sim_time_s))
+    said = {"samples": samples, "converged": outcome.converged, "sim_time_s": outcome.sim_time_s}
+    print(json.dumps(said))
 
 
 @pytest.mark.slow
 def test_a_long_run_keeps_every_process_memory_flat() -> None:
-    context = multiprocessing.get_context("spawn")
-    queue = context.Queue()
-    launcher = context.Process(target=_long_run, args=(queue,), name="launcher")
-    launcher.start()
-    try:
-        samples, converged, sim_time_s = queue.get(timeout=600)
-    finally:
-        launcher.join(timeout=60)
-        if launcher.is_alive():
-            launcher.kill()
-    assert launcher.exitcode == 0
-    assert not converged and sim_time_s >= SIMULATED_S - 1
+    run = subprocess.run(
+        [sys.executable, "-m", "tests.integration.test_memory"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+    )
+    assert run.returncode == 0, run.stderr
+    said = json.loads(run.stdout.strip().splitlines()[-1])
+    assert not said["converged"] and said["sim_time_s"] >= SIMULATED_S - 1
+    samples = {float(t): rss for t, rss in said["samples"].items()}
     times = sorted(samples)
     early, late = samples[times[0]], samples[times[-1]]
     assert times[0] < 2 * EARLY_S and times[-1] >= SIMULATED_S - EARLY_S
@@ -107,3 +111,7 @@ def test_a_long_run_keeps_every_process_memory_flat() -> None:
         after = late.get(name)
         if before is not None and after is not None:
             assert after - before < GROWTH_LIMIT, (name, report)
+
+
+if __name__ == "__main__":
+    _long_run()
