@@ -11,7 +11,7 @@ import pytest
 from mcap.reader import make_reader
 
 from dashboard.layout import COMMITTED, layout_json, main, message_path
-from tests.helpers.foxglove import decoder
+from tests.helpers.foxglove import NODE, check_recording, decoder
 from tests.helpers.recordings import record_run
 
 
@@ -43,9 +43,9 @@ def _split(path: str) -> tuple[str, str]:
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory) -> tuple[dict[str, str], dict[str, set[str]], set[str]]:
-    """A recording of the paper's team: each topic's schema, the fields its records have,
-    and the frames its transforms name."""
+def recorded(tmp_path_factory) -> Path:
+    """A recording of the paper's team (an in-process run, recorded as the plant and agents
+    publish it)."""
     from simulator.inprocess import run_inprocess
     from simulator.scenario import load_scenario
     from tests.helpers.paths import PAPER
@@ -53,10 +53,17 @@ def recording(tmp_path_factory) -> tuple[dict[str, str], dict[str, set[str]], se
     scenario = load_scenario(PAPER)
     path = tmp_path_factory.mktemp("layout") / "paper.mcap"
     record_run(path, scenario, run_inprocess(scenario))
+    return path
+
+
+@pytest.fixture(scope="module")
+def recording(recorded: Path) -> tuple[dict[str, str], dict[str, set[str]], set[str]]:
+    """The recording's topics: each one's schema, the fields its records have, and the frames
+    its transforms name."""
     schemas: dict[str, str] = {}
     fields: dict[str, set[str]] = {}
     frames: set[str] = set()
-    with open(path, "rb") as stream:
+    with open(recorded, "rb") as stream:
         for schema, channel, message in make_reader(stream).iter_messages():
             schemas[channel.topic] = schema.name
             if channel.message_encoding == "json":
@@ -65,6 +72,25 @@ def recording(tmp_path_factory) -> tuple[dict[str, str], dict[str, set[str]], se
                 frame = decoder(schema.name, schema.data).FromString(message.data)
                 frames |= {frame.parent_frame_id, frame.child_frame_id}
     return schemas, fields, frames
+
+
+@pytest.mark.skipif(NODE is None, reason="node is not installed (Foxglove's parser runs in it)")
+def test_every_topic_of_a_recording_decodes_as_foxglove_reads_it(recorded: Path) -> None:
+    """Every channel of a run's recording as Foxglove takes it: its JSON schema through
+    Foxglove's own parser, its protobuf schema as a FileDescriptorSet, and every message."""
+    rows = check_recording(recorded)
+    assert {r["schema"] for r in rows} >= {
+        "heft.Truth",
+        "heft.Estimates",
+        "heft.Command",
+        "heft.LoadGeometry",
+        "foxglove.SceneUpdate",
+        "foxglove.FrameTransform",
+        "foxglove.Log",
+    }
+    refused = [r for r in rows if not r["schema_ok"] or r["decoded"] != r["messages"]]
+    assert not refused, refused
+    assert all(r["messages"] > 0 for r in rows)
 
 
 def test_every_path_of_the_layout_is_in_a_recording(recording) -> None:
