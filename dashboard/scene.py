@@ -39,7 +39,14 @@ the message's own record: :class:`~dashboard.topics.Topics`):
   ``foxglove.Log`` (:class:`TeamNews`): a robot's phase changes, its steps settling, its
   estimates once done, and what stopped or restarted it.
 
-A team without a plant (real robots) has no truth, hence no scene: only its news.
+A team without a plant (real robots) has no truth. Until a truth is heard, each robot's
+estimates of a centroid offset (Step 2 done) draw instead, every :data:`SCENE_EVERY_S`, the
+team's own picture of itself (:meth:`Scene.team_picture`) in the frame ``team``: the centroid
+``p_G`` of the contacts at its origin, ``W``'s axes (placed at ``W``'s origin by an identity
+transform: the robots know the load's shape about ``p_G``, not where it is). There robot
+``i``'s contact is its own ``ẑ_i``, its force arrow its latest command, its estimated COM
+``ẑ_i + (p̂_C − p_Ci)`` and its neighbours' contacts ``ẑ_i − ẑ_ij``, as above; nothing of the
+truth.
 """
 
 from __future__ import annotations
@@ -87,6 +94,9 @@ WORLD = "world"
 """The frame id of ``W``."""
 LOAD = "load"
 """The frame id of the load frame (origin at the COM, turned by the truth's angle)."""
+TEAM = "team"
+"""The frame id of the team's own picture without a plant: origin at the estimated centroid
+``p_G`` of the contacts, ``W``'s axes."""
 ROBOT_COLOURS = (
     "#4e9bff", "#ff6b6b", "#5fd35f", "#ffb020", "#c77dff", "#2ee6d6", "#ff85c8", "#e8e85a",
     "#b08060", "#a8b3c2", "#8a6cff", "#ff8f5a", "#2fa37a", "#f0c0ff", "#d0383a", "#1e90b0",
@@ -155,16 +165,17 @@ class Scene:
         self.news = TeamNews()
         self.drawn_ns: int | None = None
         """The instant of the last scene update."""
+        self.truth_heard = False
+        """Whether a plant's truth was heard (else the scene is the team's own picture)."""
 
     def of(self, message: object, log_time_ns: int) -> list[tuple[str, object]]:
         """``(topic, Foxglove message)`` pairs that ``message``, of instant ``log_time_ns``
         (ns), adds to Foxglove's panels (often none)."""
         stamp = timestamp(log_time_ns)
         if isinstance(message, Truth):
+            self.truth_heard = True
             out = [(self.topics.transforms, load_frame(message, stamp))]
-            last = self.drawn_ns
-            if last is None or not 0 <= log_time_ns - last < SCENE_EVERY_S * 1e9:
-                self.drawn_ns = log_time_ns
+            if self._due(log_time_ns):
                 out.append((self.topics.scene, self.update(message, stamp)))
             return out
         if isinstance(message, LoadGeometry):
@@ -177,12 +188,46 @@ class Scene:
             latest = self.estimates.get(message.robot)
             if latest is None or message.tick >= latest.tick:
                 self.estimates[message.robot] = message
-            return [(self.topics.log, entry) for entry in self.news.estimates(message, stamp)]
+            out = [(self.topics.log, entry) for entry in self.news.estimates(message, stamp)]
+            placed = message.centroid_offset is not None  # Step 2 done: a picture to draw
+            if placed and not self.truth_heard and self._due(log_time_ns):
+                out.append((self.topics.transforms, team_frame(stamp)))
+                out.append((self.topics.scene, self.team_picture(stamp)))
+            return out
         elif isinstance(message, Status):
             return [(self.topics.log, entry) for entry in self.news.status(message, stamp)]
         elif isinstance(message, LogLine):
             return [(self.topics.log, log_entry(message, stamp))]
         return []
+
+    def _due(self, log_time_ns: int) -> bool:
+        """Whether a scene update is due at ``log_time_ns`` (:data:`SCENE_EVERY_S` since the
+        last, or the clock went back); if so, it is counted as made."""
+        last = self.drawn_ns
+        if last is not None and 0 <= log_time_ns - last < SCENE_EVERY_S * 1e9:
+            return False
+        self.drawn_ns = log_time_ns
+        return True
+
+    def team_picture(self, stamp: Timestamp) -> SceneUpdate:
+        """The team as its robots estimate it, without a plant (see the module docstring): in
+        the frame ``team``, each robot's contact at its own ``ẑ_i``."""
+        own = {
+            i: est.centroid_offset
+            for i, est in sorted(self.estimates.items())
+            if est.centroid_offset is not None
+        }
+        size = MIN_SIZE_M
+        if own:
+            spans = [
+                max(p[k] for p in own.values()) - min(p[k] for p in own.values()) for k in (0, 1)
+            ]
+            size = max(*spans, size)
+        drawing = _Drawing(stamp, size, (0.0, 0.0), 0.0, TEAM)
+        return SceneUpdate(
+            deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)],
+            entities=self._robots(drawing, own),
+        )
 
     def update(self, truth: Truth, stamp: Timestamp) -> SceneUpdate:
         """The whole scene at ``truth``'s instant (see the module docstring)."""
@@ -191,14 +236,24 @@ class Scene:
         if self.geometry is not None:
             entities.append(drawing.outline(self.geometry.outline))
         entities.append(drawing.com())
+        contacts = dict(enumerate(truth.contacts, start=1))
+        return SceneUpdate(
+            deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)],
+            entities=entities + self._robots(drawing, contacts),
+        )
+
+    def _robots(self, drawing: _Drawing, contacts: dict[int, Vec2]) -> list[SceneEntity]:
+        """Each robot's contact at ``contacts[i]`` (a point of ``W``), its force, and its
+        estimated COM and geometry about its contact."""
+        entities = []
         forces = {
             i: command.force
-            for i in range(1, len(truth.contacts) + 1)
+            for i in contacts
             if (command := self.commands.get(i)) is not None and math.hypot(*command.force) > 0
         }
         largest = max((math.hypot(*f) for f in forces.values()), default=0.0)
         scale = ARROW_FRACTION * drawing.size / largest if largest > 0.0 else 0.0
-        for i, contact in enumerate(truth.contacts, start=1):
+        for i, contact in contacts.items():
             entities.append(drawing.contact(i, contact))
             if i in forces:
                 entities.append(drawing.force(i, contact, forces[i], scale))
@@ -213,10 +268,7 @@ class Scene:
                 centroid = _minus(contact, est.centroid_offset)
             if others or centroid is not None:
                 entities.append(drawing.geometry(i, others, centroid))
-        return SceneUpdate(
-            deletions=[SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)],
-            entities=entities,
-        )
+        return entities
 
     def _size(self, truth: Truth) -> float:
         """The load's size (m): the larger side of the box around its outline (its contacts
@@ -235,6 +287,18 @@ def load_frame(truth: Truth, stamp: Timestamp) -> FrameTransform:
         child_frame_id=LOAD,
         translation=Vector3(x=x, y=y, z=0.0),
         rotation=_turn(truth.angle),
+    )
+
+
+def team_frame(stamp: Timestamp) -> FrameTransform:
+    """The team's own frame ``team`` at ``W``'s origin, with its axes (the robots know the
+    load's shape about the centroid, not where it is)."""
+    return FrameTransform(
+        timestamp=stamp,
+        parent_frame_id=WORLD,
+        child_frame_id=TEAM,
+        translation=Vector3(x=0.0, y=0.0, z=0.0),
+        rotation=_turn(0.0),
     )
 
 
@@ -274,6 +338,7 @@ class _Drawing:
     size: float
     com_position: Vec2
     angle: float
+    frame: str = LOAD
 
     def _local(self, p: Vec2) -> Vec2:
         """Point ``p`` of ``W`` in the load frame: ``R(θ)ᵀ (p − p_C)``."""
@@ -285,7 +350,9 @@ class _Drawing:
         return Pose(position=Vector3(x=x, y=y, z=z), orientation=_turn(heading - self.angle))
 
     def _entity(self, id: str, **parts) -> SceneEntity:
-        return SceneEntity(timestamp=self.stamp, frame_id=LOAD, id=id, frame_locked=True, **parts)
+        return SceneEntity(
+            timestamp=self.stamp, frame_id=self.frame, id=id, frame_locked=True, **parts
+        )
 
     def _label(self, p: Vec2, text: str, colour: str) -> TextPrimitive:
         return TextPrimitive(

@@ -358,3 +358,67 @@ def _render(update, frame, truth: Truth, t: float) -> None:
     PICTURE.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(PICTURE, facecolor=fig.get_facecolor(), metadata={"Software": None})
     plt.close(fig)
+
+
+# ------------------------------------------------------------------------------ no plant
+def test_without_a_plant_the_scene_is_the_teams_own_picture() -> None:
+    """Real robots: no truth. Once the robots have their centroid offsets, their estimates draw
+    the team as it sees itself, about the centroid of its contacts (frame ``team`` at W's
+    origin): each contact at its own ``ẑ_i``, its arrow along its command, its estimated COM
+    at ``ẑ_i + (p̂_C − p_Ci)``, its neighbours at ``ẑ_i − ẑ_ij``; nothing of a truth. Once a
+    truth is heard, the scene is the plant's again."""
+    z = {1: (-1.0, 0.5), 2: (1.0, 0.5), 3: (0.0, -1.0)}  # ẑ_i: they sum to zero
+    com = (0.2, 0.1)  # p_C − p_G, as every robot estimates it
+    scene = Scene("lab")
+    scene.of(Command(1, 40, (2.0, 0.0)), 400_000_000)
+    scene.of(Command(3, 40, (0.0, 1.0)), 400_000_000)
+    before = Estimates(1, 30, Phase.EXCITE)  # Step 2 not done: nothing to draw yet
+    assert [topic for topic, _ in scene.of(before, 300_000_000)] == ["heft/lab/log"]
+    out = []
+    for i, zi in z.items():
+        relative = {j: (zi[0] - zj[0], zi[1] - zj[1]) for j, zj in z.items() if abs(j - i) == 1}
+        est = Estimates(
+            i,
+            40,
+            Phase.INERTIA,
+            centroid_offset=zi,
+            relative_positions=relative,
+            contact_to_com=(com[0] - zi[0], com[1] - zi[1]),
+        )
+        out += scene.of(est, 400_000_000 + i)  # one picture per 50 ms: robot 1's
+    frames = [decode_message(m) for topic, m in out if topic == "heft/lab/transforms"]
+    updates = [decode_message(m) for topic, m in out if topic == "heft/lab/scene"]
+    assert len(frames) == len(updates) == 1
+    frame = frames[0]
+    assert (frame.parent_frame_id, frame.child_frame_id) == ("world", "team")
+    assert (frame.translation.x, frame.translation.y, turn(frame.rotation)) == (0.0, 0.0, 0.0)
+    entities = {e.id: e for e in updates[0].entities}
+    assert set(entities) == {"contact/1", "force/1", "com_estimate/1", "geometry/1"}
+    assert all(e.frame_id == "team" for e in entities.values())
+    assert close(in_world(frame, entities["contact/1"].spheres[0].pose), z[1])
+    assert abs(_heading(frame, entities["force/1"].arrows[0].pose)) < 1e-12  # along +x
+    ring = entities["com_estimate/1"].lines[0]
+    points = [in_world(frame, ring.pose, p.x, p.y) for p in ring.points]
+    assert close(tuple(sum(c) / len(points) for c in zip(*points)), com, 1e-9)
+    placed = [in_world(frame, s.pose) for s in entities["geometry/1"].spheres]
+    assert placed == [pytest.approx(z[2])]
+
+    # 50 ms on, every robot's estimates are in: the whole team, and the arrows of both commands.
+    later = scene.of(replace(est, tick=45), 460_000_000)
+    update = decode_message(next(m for topic, m in later if topic == "heft/lab/scene"))
+    ids = {e.id for e in update.entities}
+    assert {f"contact/{i}" for i in z} | {"force/1", "force/3"} <= ids
+    assert "force/2" not in ids and "load" not in ids and "com" not in ids
+    for e in update.entities:
+        if e.id.startswith("contact/"):
+            i = int(e.id.split("/")[1])
+            assert close(in_world(frame, e.spheres[0].pose), z[i])
+
+    # A truth: the plant's scene from now on, the team's picture no more.
+    zero = (0.0, 0.0)
+    truth = Truth(46, 0.46, zero, 0.0, zero, 0.0, (zero,) * 3, (zero,) * 3, (zero,) * 3, 5, 1)
+    assert [t for t, _ in scene.of(truth, 520_000_000)] == [
+        "heft/lab/transforms",
+        "heft/lab/scene",
+    ]
+    assert [t for t, _ in scene.of(replace(est, tick=55), 580_000_000)] == []
