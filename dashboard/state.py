@@ -57,11 +57,10 @@ from agent.platform.protocol import (
     Truth,
 )
 from dashboard.quantities import SCALARS
+from dashboard.ticks import TickWindow
 
 CAPACITY = 3000
 """Points kept per chart trace (at the 20 Hz frame rate, 2.5 minutes of a live run)."""
-TICK_SLACK = 1000
-"""How far ahead of the newest tick heard a message's tick may be (as the launcher allows)."""
 KEEP_TICKS = 1000
 """Ticks of truth and of done robots' estimates kept to find the final instant."""
 MAX_SEGMENTS = 64
@@ -174,7 +173,7 @@ class TeamState:
         self.series: dict[str, deque] = {}
         self._fresh: dict[str, deque] = {}
         """Points added since the last frame, per trace."""
-        self.latest_tick = -1
+        self.window = TickWindow()
         self.truth_sampled = -(2**62)
         self.period_s = geometry.period_s if geometry else None
         self.received: Counter[str] = Counter()
@@ -239,8 +238,7 @@ class TeamState:
         if robot is not None and not 1 <= robot <= limit:
             self.reject(kind, "not in the team")
             return False
-        tick = getattr(message, "tick", None)
-        if tick is not None and self.latest_tick >= 0 and tick > self.latest_tick + TICK_SLACK:
+        if not self.window.admits(message):
             self.reject(kind, "tick out of window")
             return False
         if isinstance(message, Truth) and self.n is not None and len(message.contacts) != self.n:
@@ -253,8 +251,7 @@ class TeamState:
         self.received[kind] += 1
         self.last_heard = now
         self.version += 1
-        if tick is not None and tick > self.latest_tick and not isinstance(message, BridgeStatus):
-            self.latest_tick = tick
+        self.window.hear(message)
         view = self._robot(robot) if robot is not None else None
         if isinstance(message, Estimates):
             self._estimates(view, message)
@@ -713,7 +710,7 @@ class TeamState:
             "team": self.team,
             "n": self.n,
             "period_s": self.period,
-            "t": self.t(max(self.latest_tick, 0)),
+            "t": self.t(max(self.window.latest, 0)),
             "done": self.done,
             "halted": self.halted,
             "stopped": self.stopped,

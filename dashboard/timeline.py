@@ -40,8 +40,8 @@ for others. ``publish_time`` stays the wall clock when each message was recorded
 
 from __future__ import annotations
 
-from agent.platform.protocol import BridgeStatus, Clock, LoadGeometry, PlantStatus, Truth
-from dashboard.state import TICK_SLACK
+from agent.platform.protocol import Clock, LoadGeometry, PlantStatus, Truth
+from dashboard.ticks import TickWindow
 
 FUTURE_NS = 60 * 10**9
 """How far ahead of the newest ``log_time`` given a message's instant may be (ns): one further
@@ -69,9 +69,8 @@ class Timeline:
         tick 0 is at 0."""
         self.newest_ns: int | None = None
         """The newest ``log_time`` given (what a message without an instant takes)."""
-        self.latest_tick = -1
-        """The newest tick heard within the window (a bridge's status's ticks are its bus's,
-        not counted)."""
+        self.window = TickWindow()
+        """The ticks believed (:meth:`in_window`)."""
         self._on_wall = False
 
     def log_time_ns(self, message: object, received_ns: int) -> int | None:
@@ -80,16 +79,10 @@ class Timeline:
         origin is not fixed: the caller holds it until it is (the next message that fixes it,
         or :meth:`on_wall`), then asks again. A message outside the window
         (:meth:`in_window`) has no instant and teaches nothing."""
-        if self.in_window(message):
+        if self.window.admits(message):
             self._learn(message)
             instant = self._instant_s(message)
-            tick = getattr(message, "tick", None)
-            if (
-                tick is not None
-                and tick > self.latest_tick
-                and not isinstance(message, BridgeStatus)
-            ):
-                self.latest_tick = tick
+            self.window.hear(message)
         else:
             instant = None
         if self.origin_ns is None:
@@ -109,12 +102,11 @@ class Timeline:
         return self._given(stamp)
 
     def in_window(self, message: object) -> bool:
-        """Whether ``message``'s tick (if it has one) is within :data:`~dashboard.state.
-        TICK_SLACK` of the newest tick heard, as the dashboard's page takes it: a message from
-        far ahead (forged, or a robot gone wrong) is recorded, but stamped with the newest
+        """Whether ``message``'s tick (if it has one) is within the window of the ticks heard
+        (:class:`~dashboard.ticks.TickWindow`, as the dashboard's page takes them): a message
+        from far ahead (forged, or a robot gone wrong) is recorded, but stamped with the newest
         instant, and teaches the clock nothing and Foxglove's scene nothing."""
-        tick = getattr(message, "tick", None)
-        return tick is None or self.latest_tick < 0 or tick <= self.latest_tick + TICK_SLACK
+        return self.window.admits(message)
 
     def on_wall(self) -> None:
         """No plant spoke first: from now on, a message without an instant before the origin
