@@ -1,15 +1,17 @@
 """Recording a team's traffic to MCAP (``heft record``, and ``heft run``/``heft demo``).
 
 One MCAP channel per Zenoh key (the topic is the key, e.g. ``heft/paper/robot/2/force``), each
-message a JSON object with every field of its protocol message under a JSON schema named
-``heft.<Class>`` (:mod:`dashboard.channels`), so that Foxglove and PlotJuggler show named
-fields. Every robot's measurements and commands are recorded, not only the estimates: a
-centralized estimator can be run on a recording afterwards, and the plant's load geometry is
-recorded as the rest is. A metadata record names the team (``heft.team``).
+message a JSON object with the fields of its protocol message (record format 2: an optional
+field absent while None) under a JSON schema named ``heft.<Class>`` (:mod:`dashboard.channels`),
+so that Foxglove and PlotJuggler show named fields; beside them, what Foxglove draws of the
+team in its own schemas (:class:`~dashboard.topics.Topics`). Every robot's measurements and
+commands are recorded, not only the estimates: a centralized estimator can be run on a
+recording afterwards, and the plant's load geometry is recorded as the rest is. A metadata
+record names the team (``heft.team``).
 
 Each message is stamped twice: ``log_time`` is its own instant on the team's clock (the
 plant's simulated time, :mod:`dashboard.timeline`), ``publish_time`` the wall clock when the
-recorder received it.
+recorder wrote it (what arrived before the team's clock was known waits for it).
 
 A recording stays readable if its process is killed: messages are written in chunks closed
 at least every :data:`FLUSH_EVERY_S` (and whenever a chunk reaches
