@@ -76,7 +76,7 @@ from agent.platform.zenoh_session import (
 from bridge.config import CanSettings, can_table
 from simulator.history import History
 from simulator.inprocess import RunOutcome, Sample
-from simulator.lockstep import INTERRUPTED, RunEnd, Verdict, halted
+from simulator.lockstep import INTERRUPTED, RunEnd, Verdict, halted, mass_verdict
 from simulator.run_folder import run_folder
 from simulator.scenario import Agvs, Scenario, scenario_to_toml
 
@@ -759,6 +759,13 @@ class _Watch:
                 " (n is fixed: estimates without a robot would be wrong)"
             )
             return halted(lost, detail)
+        final = collector.final
+        if final is not None and len(final.estimates) == collector.n:
+            found = mass_verdict(
+                [final.estimates[i] for i in sorted(final.estimates)], final.time_s
+            )
+            if found is not None:
+                return found
         return Verdict()
 
     def _processes(self) -> Verdict | None:

@@ -57,6 +57,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from agent.algorithm.robust.pipeline import PUBLISHED_FROM
 from agent.platform.evaluation import InPhase, final_instant
 from agent.platform.geometry import Vec2
 from agent.platform.protocol import Measurement, Phase, Truth
@@ -232,6 +233,31 @@ class PlantTicks:
 
 CANNOT_BREAK_AWAY = "cannot break the load away"
 """The verdict of a team whose every robot found the load held by the floor."""
+MASS_NOT_DETERMINED = "mass not determined"
+"""The verdict of a team done without a mass it could publish: its ``m̂`` stopped getting
+surer short of :data:`~agent.algorithm.robust.pipeline.PUBLISHED_FROM` of itself."""
+
+
+def mass_verdict(team: Sequence[InPhase], t_s: float) -> Verdict | None:
+    """:data:`MASS_NOT_DETERMINED` if some robot of a team done at ``t_s`` publishes no mass;
+    ``None`` if every one does."""
+    unknown = [i for i, robot in enumerate(team, 1) if _published_mass(robot) is None]
+    if not unknown:
+        return None
+    return Verdict(
+        MASS_NOT_DETERMINED,
+        f"the team was done at t = {t_s:.2f} s simulated, but robot(s) {unknown} know the mass"
+        f" only to worse than {100 * PUBLISHED_FROM:g} % (the push turned the load about a COM"
+        " known too roughly): no mass is published",
+    )
+
+
+def _published_mass(robot: InPhase) -> float | None:
+    """The mass ``robot`` publishes: its latest :class:`Estimates`' (in one process, its
+    agent's estimates now)."""
+    estimates = getattr(robot, "estimates", None)
+    found = estimates() if callable(estimates) else robot
+    return getattr(found, "mass", None)
 
 
 @dataclass(frozen=True)
@@ -300,7 +326,7 @@ class RunEnd:
         if phase == Phase.DONE:
             done = final_instant(team, self.end_tick)
             if done is not None and tick >= done:
-                return Verdict()
+                return mass_verdict(team, tick * self.period_s) or Verdict()
         if self.out_of_time(tick):
             return self.out_of_time_verdict()
         return None

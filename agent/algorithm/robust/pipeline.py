@@ -31,7 +31,7 @@ from agent.algorithm.robust.rotation import RotationConsensus, own_turn, turn_we
 from agent.algorithm.robust.team_mass import disagreement, inputs, mass_input, team_mass
 from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, FitShares, packed
 from agent.algorithm.tuning import AgentConfig
-from agent.platform.geometry import Vec2, turned_covariance
+from agent.platform.geometry import Vec2, largest_std, turned_covariance
 from agent.platform.protocol import Estimates
 
 if TYPE_CHECKING:
@@ -260,7 +260,15 @@ class RobustPipeline(EstimationPipeline):
         self.com.update(alpha, sign, span, added=added, spin=self._spin, torque=torque)
 
     def _new_mass(self, schedule: ProbeSchedule) -> MassFit:
-        return MassFit(self.n, schedule.push, self.forgetting, self.lag)
+        """Step 7's fit, the offset it is given as uncertain as Step 5's ``ẑ_C`` is published
+        (the largest standard deviation of the fit's covariance, with its calibrated factor)."""
+        offset_std = 0.0
+        cov = self.com.covariance if self.com is not None else None
+        if cov is not None:
+            (a, b), (_, d) = cov
+            scale = PUBLISHED_VARIANCE["contact_to_com"]
+            offset_std = math.sqrt(scale) * largest_std(a, b, d)
+        return MassFit(self.n, schedule.push, self.forgetting, self.lag, offset_std=offset_std)
 
     def _update_mass(
         self, velocity: Vec2, offset: Vec2, sign: float, span: float, added: Vec2

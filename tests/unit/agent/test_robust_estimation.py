@@ -294,6 +294,36 @@ def test_mass_fit_is_exact_without_noise() -> None:
     assert fit.std < 1e-3
 
 
+def test_mass_fit_widens_by_an_uncertain_offset_as_the_load_turns() -> None:
+    """A contact's offset to the COM given 5 cm off: as the load turns the fit's COM
+    displacement is off by ``(R(α) − I) δ``. Told the offset's uncertainty, the published
+    ``m̂`` holds the truth; told nothing, it is as confidently wrong as the data are clean."""
+    n, mass, force, offset0, delta = 4, 5.0, (0.0, 3.0), (1.2, -0.7), (0.05, 0.0)
+    v0 = (0.1, -0.2)
+
+    def fitted(offset_std: float, rate: float) -> MassFit:
+        fit = MassFit(n, force, offset_std=offset_std)
+        for k in range(400):
+            t = k * DT
+            angle = rate * t
+            offset = rotate(offset0, angle)  # p_Ci − p_C
+            told = rotate((offset0[0] + delta[0], offset0[1] + delta[1]), angle)
+            com_velocity = (v0[0] + n * force[0] / mass * t, v0[1] + n * force[1] / mass * t)
+            contact = (com_velocity[0] - rate * offset[1], com_velocity[1] + rate * offset[0])
+            fit.update(contact, told, angle, 1.0, DT, com_velocity=com_velocity)
+        return fit
+
+    blind, told = fitted(0.0, 0.8), fitted(0.05, 0.8)
+    error = abs(blind.estimate - mass)
+    assert error > 0.01 * mass  # the offset's error moves the mass by over 1 %
+    assert error > 10 * blind.std  # and nothing says so
+    assert told.estimate == blind.estimate  # the estimate is the same, its uncertainty not
+    assert error < 1.96 * told.std < 20 * error
+    still = fitted(0.05, 0.0)  # a load that does not turn: the offset's error moves nothing
+    assert still.estimate == pytest.approx(mass, rel=1e-4)
+    assert still.std == pytest.approx(fitted(0.0, 0.0).std, rel=1e-9)
+
+
 @pytest.mark.parametrize(
     ("mu", "mass", "push", "tolerance"),
     [(0.0, 5.0, 4.0, 2e-3), (0.02, 5.0, 4.0, 2e-3), (0.3, 20.0, 25.0, 4e-3)],

@@ -1,0 +1,55 @@
+"""A mass the team cannot back is not published: generated load 47 on the noise benchmark's
+floor (10.5 kg, J = 8.5 kg m² under three robots whose centroid is 1.3 m from its COM,
+μ = 1.65 %) leaves Step 5 with ``ẑ_C`` 30 cm off, its standard deviation 28 cm. Step 7's push,
+meant to act through that COM, turns the load, and the COM's displacement the mass fit reads is
+off by the offset's error turned. Its ``m̂`` was 37 % off behind a published 95 % interval of
+±9.5 %: now the mass fit's uncertainty carries the offset's (``MassFit._offset_variance``), no
+robot publishes a mass known to worse than 25 %, and the run ends with that verdict."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from simulator.inprocess import run_inprocess
+from simulator.launcher import _Watch
+from simulator.lockstep import MASS_NOT_DETERMINED, Verdict, mass_verdict
+from simulator.results import results_dict
+from tests.helpers.floor import generated_on_floor
+
+
+def test_a_mass_known_too_roughly_gets_a_verdict_not_a_number() -> None:
+    scenario, _, _ = generated_on_floor(47, max_time_s=40.0)
+    outcome = run_inprocess(scenario)
+    final = outcome.final
+    if outcome.converged:  # then every robot's interval holds the truth
+        for est in final.estimates.values():
+            assert abs(est.mass - final.truth.mass) <= 1.96 * est.mass_std, est
+        return
+    assert outcome.reason == MASS_NOT_DETERMINED, outcome.detail
+    assert "worse than 25 %" in outcome.detail
+    assert all(est.mass is None for est in final.estimates.values())
+    assert results_dict(outcome)["reason"] == MASS_NOT_DETERMINED
+
+
+def test_the_verdict_names_the_robots_without_a_mass() -> None:
+    assert mass_verdict([SimpleNamespace(mass=5.0), SimpleNamespace(mass=5.1)], 12.0) is None
+    team = [SimpleNamespace(mass=m) for m in (5.0, None, None)]
+    found = mass_verdict(team, 12.0)
+    assert isinstance(found, Verdict) and found.reason == MASS_NOT_DETERMINED
+    assert "robot(s) [2, 3]" in found.detail and "t = 12.00 s" in found.detail
+
+
+def test_a_team_over_zenoh_done_without_a_mass_gets_the_verdict_too() -> None:
+    """The processes' run reads the same from the robots' final estimates."""
+
+    def watch(masses) -> Verdict:
+        estimates = {i: SimpleNamespace(mass=m) for i, m in enumerate(masses, 1)}
+        final = SimpleNamespace(estimates=estimates, time_s=30.5)
+        found = _Watch.__new__(_Watch)
+        found.collector = SimpleNamespace(halted=False, final=final, n=len(masses), lost=())
+        found.gone = {}
+        return found._team()
+
+    assert watch([5.0, 5.1, 4.9]) == Verdict()
+    unknown = watch([None, None, None])
+    assert unknown.reason == MASS_NOT_DETERMINED and "t = 30.50 s" in unknown.detail
