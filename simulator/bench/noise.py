@@ -153,9 +153,9 @@ class NoiseSettings:
     seeds: int = 20
     first_seed: int = 0
     """The seeds run are ``first_seed .. first_seed + seeds − 1`` (the published variances'
-    factors were measured on the generated loads on floors, seeds 0–39; seeds 40–79 are their
-    check: ``heft bench calibrate published-variance --generated --coulomb-range 0.005
-    0.03``)."""
+    factors were measured on the generated loads on floors, seeds 80–199; seeds 0–79 are their
+    check: ``heft bench calibrate published-variance --generated --coulomb-range 0.005 0.03
+    --first-seed 80 --seeds 120``)."""
     max_time_s: float = 60.0
     spin_speed: float = 1.0
     """m/s: Step 1's spin-up target, for both estimators (the default; the paper's scenario

@@ -33,7 +33,7 @@ def test_a_heavy_load_the_first_kick_cannot_move_is_estimated() -> None:
     strict=True,
     reason="known: since Step 1's spin-up is a torque with no net force (its brake fading out"
     " after the kick), seed 49's three robots agree on an m̂ 3.6 % high (μ̂ 3 % low: the fit"
-    " trades one for the other) behind a published 95 % interval of ±2.3 %",
+    " trades one for the other) behind a published 95 % interval of ±1.5 %",
 )
 def test_a_heavy_load_is_pushed_hard_enough_and_still_to_find_its_mass() -> None:
     """Seed 49 (39 kg, J = 25 kg m² under 3 robots, μ = 1.3 %): the contacts' brake left it
