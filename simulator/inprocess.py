@@ -31,7 +31,14 @@ from agent.algorithm.tuning import AgentConfig
 from agent.platform.protocol import Estimates, Measurement, Truth
 from agent.platform.transport import InMemoryTransport, Transport
 from simulator.history import History
-from simulator.lockstep import ALIGN_TICKS, INTERRUPTED, PlantTicks, RunEnd, Verdict
+from simulator.lockstep import (
+    ALIGN_TICKS,
+    INTERRUPTED,
+    PlantTicks,
+    RunEnd,
+    Verdict,
+    mass_verdict,
+)
 from simulator.scenario import Scenario
 
 Progress = Callable[[int, float, list[Agent]], None]
@@ -167,6 +174,7 @@ def run_inprocess(
             raise
         verdict = Verdict(INTERRUPTED, "asked to stop")
     assert final is not None and verdict is not None
+    verdict = mass_verdict(verdict, final.estimates, final.time_s)
     return RunOutcome(
         scenario=scenario,
         converged=not verdict.reason,

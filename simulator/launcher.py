@@ -604,6 +604,7 @@ def run_outcome(
     if final is None:
         nothing = f"no instant of every robot's estimates with the truth was {heard}"
         raise RunFailed(verdict.reason or f"nothing {heard}", transport, verdict.detail or nothing)
+    verdict = mass_verdict(verdict, final.estimates, final.time_s)
     return RunOutcome(
         scenario=scenario,
         converged=not verdict.reason,
@@ -759,13 +760,6 @@ class _Watch:
                 " (n is fixed: estimates without a robot would be wrong)"
             )
             return halted(lost, detail)
-        final = collector.final
-        if final is not None and len(final.estimates) == collector.n:
-            found = mass_verdict(
-                [final.estimates[i] for i in sorted(final.estimates)], final.time_s
-            )
-            if found is not None:
-                return found
         return Verdict()
 
     def _processes(self) -> Verdict | None:

@@ -37,7 +37,8 @@ The run's end (:class:`RunEnd`), decided on the team's state, never on message t
 - *done*: every robot is done, and the scenario's ``end_tick`` (its load changes and hold) has
   come: the final instant is ``t_f = max(end_tick, max_i phase_since_i)``
   (:func:`~agent.platform.evaluation.final_instant`), and the run is over at tick ``t_f``,
-  converged;
+  converged, unless some robot's estimates then publish no mass (:func:`mass_verdict`:
+  "mass not determined", which both runs apply to their final instant);
 - *halted*: every robot halted (one robot's halt reaches the whole team: it is the highest
   phase): over, not converged;
 - *out of simulated time*: tick ``k`` is the scenario's last (``run.max_time_s``), the team
@@ -53,14 +54,14 @@ a run over processes out of simulated time is judged at the newest such instant 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 from agent.algorithm.robust.pipeline import PUBLISHED_FROM
 from agent.platform.evaluation import InPhase, final_instant
 from agent.platform.geometry import Vec2
-from agent.platform.protocol import Measurement, Phase, Truth
+from agent.platform.protocol import Estimates, Measurement, Phase, Truth
 
 if TYPE_CHECKING:
     from bridge.admittance import Admittance
@@ -238,28 +239,6 @@ MASS_NOT_DETERMINED = "mass not determined"
 surer short of :data:`~agent.algorithm.robust.pipeline.PUBLISHED_FROM` of itself."""
 
 
-def mass_verdict(team: Sequence[InPhase], t_s: float) -> Verdict | None:
-    """:data:`MASS_NOT_DETERMINED` if some robot of a team done at ``t_s`` publishes no mass;
-    ``None`` if every one does."""
-    unknown = [i for i, robot in enumerate(team, 1) if _published_mass(robot) is None]
-    if not unknown:
-        return None
-    return Verdict(
-        MASS_NOT_DETERMINED,
-        f"the team was done at t = {t_s:.2f} s simulated, but robot(s) {unknown} know the mass"
-        f" only to worse than {100 * PUBLISHED_FROM:g} % (the push turned the load about a COM"
-        " known too roughly): no mass is published",
-    )
-
-
-def _published_mass(robot: InPhase) -> float | None:
-    """The mass ``robot`` publishes: its latest :class:`Estimates`' (in one process, its
-    agent's estimates now)."""
-    estimates = getattr(robot, "estimates", None)
-    found = estimates() if callable(estimates) else robot
-    return getattr(found, "mass", None)
-
-
 @dataclass(frozen=True)
 class Verdict:
     """Why a run ended: ``reason`` is short and machine-readable (``""``: converged), ``detail``
@@ -274,6 +253,20 @@ def halted(lost: Iterable[int], detail: str) -> Verdict:
     without one of them would be wrong), or only that it halted."""
     robots = sorted(lost)
     return Verdict(f"robot(s) {robots} lost" if robots else TEAM_HALTED, detail)
+
+
+def mass_verdict(verdict: Verdict, estimates: Mapping[int, Estimates], t_s: float) -> Verdict:
+    """``verdict``, or :data:`MASS_NOT_DETERMINED` if it says the team converged while some
+    robot's final ``estimates`` (at ``t_s``) publish no mass."""
+    unknown = [robot for robot, est in sorted(estimates.items()) if est.mass is None]
+    if verdict.reason or not unknown:
+        return verdict
+    return Verdict(
+        MASS_NOT_DETERMINED,
+        f"the team was done at t = {t_s:.2f} s simulated, but robot(s) {unknown} know the mass"
+        f" only to worse than {100 * PUBLISHED_FROM:g} % (the push turned the load about a COM"
+        " known too roughly): no mass is published",
+    )
 
 
 @dataclass(frozen=True)
@@ -326,7 +319,7 @@ class RunEnd:
         if phase == Phase.DONE:
             done = final_instant(team, self.end_tick)
             if done is not None and tick >= done:
-                return mass_verdict(team, tick * self.period_s) or Verdict()
+                return Verdict()
         if self.out_of_time(tick):
             return self.out_of_time_verdict()
         return None

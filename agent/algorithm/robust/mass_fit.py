@@ -93,9 +93,9 @@ class MassFit(ReciprocalFit):
         super().__init__(4, forgetting)
         self.offset_std = offset_std
         """m: the standard deviation of the offset ``o`` the fit is given (per axis)."""
-        self._offset_rows = [0.0] * 8
-        """``Σ a_k g_kᵀ`` (4 × 2, row-major): each row ``a_k`` times how an error ``δ`` of the
-        offset moves its target, ``g_k = ((R(α) − I) δ)``'s coefficients (see
+        self._offset_rows = [0.0] * (2 * self.fit.params)
+        """``Σ a_k g_kᵀ`` (params × 2, row-major): each row ``a_k`` times how an error ``δ`` of
+        the offset moves its target, ``g_k = ((R(α) − I) δ)``'s coefficients (see
         :meth:`_offset_variance`)."""
         self.n = n
         self.total_force = (n * force[0], n * force[1])
@@ -174,7 +174,7 @@ class MassFit(ReciprocalFit):
         turned = angle - self._angle0
         c1, s1 = math.cos(turned) - 1.0, math.sin(turned)
         cross, lam = self._offset_rows, self.fit.forgetting
-        for i in range(4):  # the targets move by (c1 δx − s1 δy, s1 δx + c1 δy)
+        for i in range(self.fit.params):  # the targets move by (c1 δx − s1 δy, s1 δx + c1 δy)
             ax_, ay_ = row_x[i], row_y[i]
             cross[2 * i] = lam * cross[2 * i] + ax_ * c1 + ay_ * s1
             cross[2 * i + 1] = lam * cross[2 * i + 1] - ax_ * s1 + ay_ * c1
@@ -191,9 +191,9 @@ class MassFit(ReciprocalFit):
         fit = self._solution
         if fit is None or self.offset_std <= 0.0:
             return 0.0
-        inverse, cross = fit.inverse, self._offset_rows
-        gx = sum(inverse[index * 4 + j] * cross[2 * j] for j in range(4))
-        gy = sum(inverse[index * 4 + j] * cross[2 * j + 1] for j in range(4))
+        inverse, cross, p = fit.inverse, self._offset_rows, self.fit.params
+        gx = sum(inverse[index * p + j] * cross[2 * j] for j in range(p))
+        gy = sum(inverse[index * p + j] * cross[2 * j + 1] for j in range(p))
         return self.offset_std**2 * (gx * gx + gy * gy)
 
     def _solve(self) -> None:

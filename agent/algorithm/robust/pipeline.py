@@ -260,8 +260,10 @@ class RobustPipeline(EstimationPipeline):
         self.com.update(alpha, sign, span, added=added, spin=self._spin, torque=torque)
 
     def _new_mass(self, schedule: ProbeSchedule) -> MassFit:
-        """Step 7's fit, the offset it is given as uncertain as Step 5's ``ẑ_C`` is published
-        (the largest standard deviation of the fit's covariance, with its calibrated factor)."""
+        """Step 7's fit, the offset it is given as uncertain as Step 5's fit makes ``ẑ_C``: the
+        largest standard deviation of that fit's covariance, scaled by ``contact_to_com``'s
+        calibrated factor (``ẑ_C``'s share of the published ``contact_to_com`` covariance, to
+        which :meth:`_reported` adds ``z_i``'s, ``Ĵ``'s and the gains')."""
         offset_std = 0.0
         cov = self.com.covariance if self.com is not None else None
         if cov is not None:

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 from agent.platform.protocol import Estimates, Keys, Phase, Truth, encode
 from simulator import launcher
-from simulator.lockstep import INTERRUPTED, Verdict
+from simulator.lockstep import INTERRUPTED, MASS_NOT_DETERMINED, Verdict
 from simulator.scenario import load_scenario
 from tests.helpers.fakes import FakeFifo
 from tests.helpers.paths import PAPER
@@ -117,3 +117,24 @@ def test_a_ctrl_c_that_also_stopped_the_router_is_an_interrupted_run() -> None:
     router.process.code = None
     collector.stop = threading.Event()
     assert watch.run(stop, None, 1.0, time.perf_counter() + 60).reason == launcher.ROUTER_LOST
+
+
+def test_a_team_done_without_a_mass_is_not_converged() -> None:
+    """The run over Zenoh judges its final instant as the in-process run does: a team whose
+    robots are done while one publishes no mass ends with the verdict "mass not determined"
+    (:func:`~simulator.lockstep.mass_verdict`), not as converged."""
+    keys = Keys("t")
+    scenario = load_scenario(PAPER)
+    for masses, reason in (((5.1, 4.9), ""), ((5.1, None), MASS_NOT_DETERMINED)):
+        subscriptions = _Subscriptions()
+        collector = launcher.Collector(subscriptions, keys, 2, record_every=5)
+        subscriptions.feed(keys.truth(), encode(_truth(100)))
+        for robot, mass in enumerate(masses, 1):
+            done = Estimates(robot, 100, Phase.DONE, 100, mass=mass)
+            subscriptions.feed(keys.all_estimates(), encode(done))
+        collector.drain(0.0)
+        assert collector.finished()
+        outcome = launcher.run_outcome(scenario, collector, Verdict(), time.perf_counter(), {})
+        assert outcome.reason == reason and outcome.converged == (not reason)
+        if reason:
+            assert "robot(s) [2]" in outcome.detail and "t = 1.00 s" in outcome.detail

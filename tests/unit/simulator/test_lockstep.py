@@ -15,7 +15,7 @@ from bridge.admittance import Admittance
 from bridge.codec import AgvCodec, clamp_force
 from simulator.can_drivers import CanQuantiser
 from simulator.inprocess import run_inprocess
-from simulator.lockstep import MASS_NOT_DETERMINED, PlantTicks, RunEnd, Verdict
+from simulator.lockstep import PlantTicks, RunEnd, Verdict
 from simulator.plant import Plant
 from simulator.scenario import Scenario, load_scenario
 from tests.helpers.paths import PAPER
@@ -23,8 +23,8 @@ from tests.helpers.paths import PAPER
 END = RunEnd(end_tick=100, last_tick=1000, period_s=0.01, max_time_s=10.0)
 
 
-def _team(*robots: tuple[Phase, int], mass: float | None = 5.0) -> list[SimpleNamespace]:
-    return [SimpleNamespace(phase=phase, phase_since=since, mass=mass) for phase, since in robots]
+def _team(*robots: tuple[Phase, int]) -> list[SimpleNamespace]:
+    return [SimpleNamespace(phase=phase, phase_since=since) for phase, since in robots]
 
 
 def test_a_run_is_over_once_the_team_is_done_and_the_scenario_has_ended() -> None:
@@ -34,8 +34,6 @@ def test_a_run_is_over_once_the_team_is_done_and_the_scenario_has_ended() -> Non
     late = _team((Phase.DONE, 60), (Phase.DONE, 140))
     assert END.over(140, late) == Verdict()
     assert END.over(500, _team((Phase.DONE, 60), (Phase.PUSH, 80))) is None
-    unknown = END.over(140, _team((Phase.DONE, 60), (Phase.DONE, 140), mass=None))
-    assert unknown is not None and unknown.reason == MASS_NOT_DETERMINED, unknown
 
 
 def test_a_halted_team_or_one_out_of_time_is_over_and_not_converged() -> None:

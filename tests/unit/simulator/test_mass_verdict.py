@@ -11,7 +11,6 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 from simulator.inprocess import run_inprocess
-from simulator.launcher import _Watch
 from simulator.lockstep import MASS_NOT_DETERMINED, Verdict, mass_verdict
 from simulator.results import results_dict
 from tests.helpers.floor import generated_on_floor
@@ -32,24 +31,11 @@ def test_a_mass_known_too_roughly_gets_a_verdict_not_a_number() -> None:
 
 
 def test_the_verdict_names_the_robots_without_a_mass() -> None:
-    assert mass_verdict([SimpleNamespace(mass=5.0), SimpleNamespace(mass=5.1)], 12.0) is None
-    team = [SimpleNamespace(mass=m) for m in (5.0, None, None)]
-    found = mass_verdict(team, 12.0)
-    assert isinstance(found, Verdict) and found.reason == MASS_NOT_DETERMINED
+    known = {1: SimpleNamespace(mass=5.0), 2: SimpleNamespace(mass=5.1)}
+    assert mass_verdict(Verdict(), known, 12.0) == Verdict()
+    unknown = {robot: SimpleNamespace(mass=m) for robot, m in ((1, 5.0), (2, None), (3, None))}
+    found = mass_verdict(Verdict(), unknown, 12.0)
+    assert found.reason == MASS_NOT_DETERMINED
     assert "robot(s) [2, 3]" in found.detail and "t = 12.00 s" in found.detail
-
-
-def test_a_team_over_zenoh_done_without_a_mass_gets_the_verdict_too() -> None:
-    """The processes' run reads the same from the robots' final estimates."""
-
-    def watch(masses) -> Verdict:
-        estimates = {i: SimpleNamespace(mass=m) for i, m in enumerate(masses, 1)}
-        final = SimpleNamespace(estimates=estimates, time_s=30.5)
-        found = _Watch.__new__(_Watch)
-        found.collector = SimpleNamespace(halted=False, final=final, n=len(masses), lost=())
-        found.gone = {}
-        return found._team()
-
-    assert watch([5.0, 5.1, 4.9]) == Verdict()
-    unknown = watch([None, None, None])
-    assert unknown.reason == MASS_NOT_DETERMINED and "t = 30.50 s" in unknown.detail
+    halted = Verdict("team halted", "the team halted")  # a verdict already given stands
+    assert mass_verdict(halted, unknown, 12.0) == halted
