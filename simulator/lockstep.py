@@ -264,8 +264,8 @@ def mass_verdict(verdict: Verdict, estimates: Mapping[int, Estimates], t_s: floa
     return Verdict(
         MASS_NOT_DETERMINED,
         f"the team was done at t = {t_s:.2f} s simulated, but robot(s) {unknown} know the mass"
-        f" only to worse than {100 * PUBLISHED_FROM:g} % (the push turned the load about a COM"
-        " known too roughly): no mass is published",
+        f" only to worse than {100 * PUBLISHED_FROM:g} %, or measured it while the load turned"
+        " under the push (a COM known too roughly): no mass is published",
     )
 
 

@@ -141,7 +141,7 @@ class Schedule(Protocol):
         """Whether ticks ``first..last − 1`` are in the push's stage for Step 7."""
         ...
 
-    def mean_push_damping(self, first: int, last: int) -> Vec2:
+    def mean_push_added(self, first: int, last: int) -> Vec2:
         """The mean force each robot added to the push over ticks ``first..last − 1``."""
         ...
 

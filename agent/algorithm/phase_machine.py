@@ -106,9 +106,11 @@ class PhaseMachine:
         """``+1`` while the inertia phase speeds the turn up, ``−1`` while it brakes."""
         self._torque: dict[int, float] = {}
         """The team's torque during each tick: Step 4's ``±k w``; in Step 5's swing, what the family
-        adds beyond a constant torque (:meth:`mean_torque`)."""
-        self._damping: dict[int, Vec2] = {}
-        """What this robot added to the common push during each tick (robust ``push_damping``)."""
+        adds beyond a constant torque; in Step 7's stage, the torque that holds the turn
+        (:meth:`mean_torque`)."""
+        self._added: dict[int, Vec2] = {}
+        """What this robot added to the common push ``s(t) f`` during each tick (the robust
+        family's ``push_damping``, and its push across ``f`` in Step 7's stage)."""
         self.moment_used: float | None = None
         """The ``Ĵ`` the push force was sized with (Steps 5 and 7 use it too)."""
         self.friction_used = 0.0
@@ -298,13 +300,13 @@ class PhaseMachine:
         push, unless a family stages it."""
         return True
 
-    def mean_push_damping(self, first: int, last: int) -> Vec2:
+    def mean_push_added(self, first: int, last: int) -> Vec2:
         """The mean of what each robot added to the common force over ticks ``first..last − 1``
-        (zero unless the family damps the push)."""
-        damping, none = self._damping, (0.0, 0.0)
+        (zero unless the family damps the push or pushes across it)."""
+        added, none = self._added, (0.0, 0.0)
         x = y = 0.0  # each sum from 0.0, term by term (as ``sum`` adds floats up to 3.11)
         for t in range(first, last):
-            a = damping.get(t, none)
+            a = added.get(t, none)
             x += a[0]
             y += a[1]
         return (x / (last - first), y / (last - first))
@@ -320,16 +322,16 @@ class PhaseMachine:
     def mean_torque(self, first: int, last: int) -> float:
         """The team's mean torque over ticks ``first..last − 1``: Step 4's input ``±k w``, and
         in Step 5's swing what the family adds beyond a constant torque (the robust family's
-        brake near ``max_turn_rate``)."""
+        brake near ``max_turn_rate``), in Step 7's stage the torque that holds the turn."""
         torque, total = self._torque, 0.0
         for t in range(first, last):
             total += torque.get(t, 0.0)
         return total / (last - first)
 
     def forget(self, before: int) -> None:
-        """Drop the torque and the damping of tick ``before`` (too old to be asked for)."""
+        """Drop the torque and the force added of tick ``before`` (too old to be asked for)."""
         self._torque.pop(before, None)
-        self._damping.pop(before, None)
+        self._added.pop(before, None)
 
     # ---------------------------------------------------------------- a family's hooks
     def _inertia_direction(self, k: int, own: OwnEstimates) -> float:

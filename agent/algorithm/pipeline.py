@@ -153,11 +153,13 @@ class EstimationPipeline:
 
     @property
     def com_offset_now(self) -> Vec2 | None:
-        """``z_C`` (Step 5) at the estimation instant (``None`` before the push)."""
-        return self.com_offset(self.angle - self.push_angle)
+        """``z_C`` as Step 5 found it at the estimation instant, which the push uses
+        (``None`` before the push)."""
+        return self._push_offset(self.angle - self.push_angle)
 
     def com_offset(self, alpha: float) -> Vec2 | None:
-        """``z_C`` after the rotation ``alpha`` since the push began (Step 5)."""
+        """``z_C`` after the rotation ``alpha`` since the push began (Step 5), as
+        published."""
         return self.com.com_offset(alpha) if self.com is not None else None
 
     def settled(self, phase: Phase) -> bool:
@@ -286,7 +288,7 @@ class EstimationPipeline:
             return
         alpha = self.angle - self.push_angle
         sign = schedule.mean_push_sign(prev, e) if pushing else 0.0
-        added = schedule.mean_push_damping(prev, e) if pushing else (0.0, 0.0)
+        added = schedule.mean_push_added(prev, e) if pushing else (0.0, 0.0)
         swinging = pushing and schedule.swinging(prev, e)
         self.swung = self.swung or (pushing and not swinging)
         if swinging:
@@ -303,7 +305,7 @@ class EstimationPipeline:
         if self.mass_after_com and not self.settle.com_offset.settled:
             if self.mass_estimator is None:
                 return
-        z_c = self.com_offset(alpha)
+        z_c = self._push_offset(alpha)
         x = self.consensus.centroid
         offset = (x[0] + z_c[0], x[1] + z_c[1])
         v_i = inbox.own_velocity.get(e)
@@ -319,6 +321,7 @@ class EstimationPipeline:
             self.mass_estimator = self._new_mass(schedule)
             self.started[6] = e
             self.started[7] = e
+        self._held(alpha, sign, span, added, schedule.mean_torque(prev, e))
         self._update_mass(v_i, offset, sign, span, added)
         mass = self.mass_estimator.estimate
         if mass is not None:
@@ -465,6 +468,16 @@ class EstimationPipeline:
         self, alpha: float, sign: float, span: float, added: Vec2, torque: float = 0.0
     ) -> None:
         raise NotImplementedError
+
+    def _push_offset(self, alpha: float) -> Vec2 | None:
+        """``z_C`` as Step 5 found it, after a rotation ``alpha``: what Steps 6 and 7 use,
+        and the push (:attr:`com_offset_now`), while the team pushes."""
+        return self.com_offset(alpha)
+
+    def _held(self, alpha: float, sign: float, span: float, added: Vec2, torque: float) -> None:
+        """Over an interval ``span`` of Step 7's stage: the rotation ``alpha`` since the push
+        began, the push's mean sign, the mean force each robot added and the team's mean
+        torque beyond the push's (a family's hook: nothing here)."""
 
     def _new_mass(self, schedule: Schedule) -> Any:
         raise NotImplementedError

@@ -177,6 +177,22 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
         " every robot, so that each edge's two terms cancel",
     ),
     TeamQuantity(
+        "mean_com_weight",
+        1,
+        1.0,
+        Averaging.MEAN,
+        doc="ζ_i → the share of robots with a z_C of their own (robust Steps 5 and 7),"
+        " input 1 or 0",
+    ),
+    TeamQuantity(
+        "mean_weighted_com",
+        2,
+        MAX_DISTANCE,
+        Averaging.MEAN,
+        turns=True,
+        doc="ψ_i → the mean of ζ_j ẑ_C,j: the team's z_C is it over ζ (robust)",
+    ),
+    TeamQuantity(
         "rotation",
         1,
         math.pi,

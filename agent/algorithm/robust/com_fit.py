@@ -54,6 +54,7 @@ class ComFit(RunFit):
         super().__init__(5, forgetting)
         k = n / moment
         self.k = k
+        self.force = force
         self.inverse_moment = 1.0 / moment
         self.base = (k * force[1], -k * force[0])  # (n/J) Qᵀ f
         self.lag = lag
@@ -67,9 +68,10 @@ class ComFit(RunFit):
         """``∫φ`` since the first sample."""
         self._twice: Vec2 = (0.0, 0.0)
         """``Ψ = ∫∫φ`` since the first sample."""
-        self._spin_once = 0.0
-        self._spin_twice = 0.0
-        """``Σ_ω = ∫∫ sgn ω`` since the first sample."""
+        self._column_once = 0.0
+        self._column_twice = 0.0
+        """The fifth column since the first sample, ``Σ_ω = ∫∫ sgn ω`` here (its
+        integrand's first integral, then its second)."""
         self._torque_once = 0.0
         self._torque_twice = 0.0
         """``∫∫ τ/J`` since the first sample: the turn of the known torque, taken out of α."""
@@ -93,6 +95,13 @@ class ComFit(RunFit):
         mean force ``added``, the team a mean torque ``torque`` about the COM beyond the
         constant ``d`` (N m: the brake as the turn nears ``max_turn_rate``) and the load
         turned the way ``spin`` (the first call, at the push's first instant, starts)."""
+        self._add_row(alpha, sign, dt, added, spin, torque)
+
+    def _add_row(
+        self, alpha: float, sign: float, dt: float, added: Vec2, column: float, torque: float
+    ) -> None:
+        """The row at ``α``: the regressor's integrals over the interval ``dt``, the fifth
+        column's integrand ``column`` and the known ``torque`` (N m) over it; solves."""
         k = self.k
         ax, ay = k * added[1], -k * added[0]  # (n/J) Qᵀ a
         c, s = math.cos(-alpha), math.sin(-alpha)  # R(−α)
@@ -112,8 +121,8 @@ class ComFit(RunFit):
                 ty + dt * oy + dd * (p0y / 3.0 + phy / 6.0),
             )
             self._once = (ox + h * (p0x + phx), oy + h * (p0y + phy))
-            self._spin_twice += self._spin_once * dt + 0.5 * spin * dd
-            self._spin_once += spin * dt
+            self._column_twice += self._column_once * dt + 0.5 * column * dd
+            self._column_once += column * dt
             u = torque * self.inverse_moment  # τ / J
             self._torque_twice += self._torque_once * dt + 0.5 * u * dd
             self._torque_once += u * dt
@@ -128,11 +137,15 @@ class ComFit(RunFit):
                 self.t,
                 sx - lag * ox + lag2 * px + lagged * ex,
                 sy - lag * oy + lag2 * py + lagged * ey,
-                self._spin_twice,
+                self._column_twice,
             ),
-            alpha - self._torque_twice,
+            alpha - self._known_turn(torque * self.inverse_moment),
         )
         self._solve()
+
+    def _known_turn(self, now: float) -> float:
+        """The turn ``∫∫ τ/J`` of the known torque (``now``: ``τ/J`` over the last interval)."""
+        return self._torque_twice
 
     @property
     def estimate(self) -> Vec2 | None:

@@ -72,6 +72,58 @@ class LeastSquares:
         rss = max(self._bb - explained, 0.0)
         return Solution(estimate, inverse, rss / (self.rows - p), self.rows, self._form)
 
+    def solve_with_prior(
+        self, at: tuple[int, int], mean: Sequence[float], information: Sequence[float], scale: float
+    ) -> Solution | None:
+        """``p̂`` with a Gaussian prior on the two parameters ``at``: its ``mean`` and its
+        ``information`` (the inverse of its covariance, row-major 2 × 2), beside the rows whose
+        covariance is ``scale σ̂² M⁻¹`` (``scale``: a :class:`RunFit`'s correlation factor).
+        The two combine in information form,
+
+            (M / (scale σ̂²) + Eᵀ I E) p̂ = v / (scale σ̂²) + Eᵀ I μ,
+
+        ``E`` picking the two parameters, with ``σ̂² = RSS(p̂) / (N − p)`` the rows' own mean
+        square residual at ``p̂`` (``RSS(p) = Σb² − 2 pᵀ v + pᵀ M p``), found by fixed-point
+        iteration from a negligible weight of the rows' (:data:`PRIOR_PASSES` passes). The
+        rows need not determine every parameter: the prior completes them. The
+        :class:`Solution`'s ``inverse`` is that of the combined matrix times ``scale σ̂²``, so
+        that its :meth:`~Solution.covariance` ``(scale)`` is the posterior's. ``None`` with
+        fewer than ``p + 1`` rows or a singular combination."""
+        p = self.params
+        if self.rows <= p:
+            return None
+        full = [self._m[max(i, j) * p + min(i, j)] for i in range(p) for j in range(p)]
+        i, j = sorted(at)
+        a, b, _, d = information
+        trace = sum(full[k * (p + 1)] for k in range(p))
+        weight = _FIRST_WEIGHT * trace / max(a + d, 1e-300)
+        solved = None
+        for _ in range(PRIOR_PASSES):
+            m, v = list(self._m), list(self._v)
+            m[i * p + i] += weight * a
+            m[j * p + i] += weight * b
+            m[j * p + j] += weight * d
+            v[i] += weight * (a * mean[0] + b * mean[1])
+            v[j] += weight * (b * mean[0] + d * mean[1])
+            solved = self._solve(m, v)
+            if solved is None:
+                return None
+            estimate = solved[0]
+            fitted = sum(e * f for e, f in zip(estimate, self._v, strict=True))
+            rss = max(self._bb - 2.0 * fitted + self._form(full, estimate), 0.0)
+            variance = rss / (self.rows - p)
+            if variance == 0.0:
+                break
+            weight = scale * variance
+        estimate, inverse, _ = solved
+        return Solution(estimate, inverse, variance, self.rows, self._form)
+
+
+PRIOR_PASSES = 3
+"""Passes of :meth:`LeastSquares.solve_with_prior`'s fixed point on ``σ̂²``: the first from a
+negligible weight of the rows' (:data:`_FIRST_WEIGHT`), each next at the last ``σ̂²``."""
+_FIRST_WEIGHT = 1e-9
+
 
 CORRELATION_TIME = 0.4
 """s: how long the errors of an angle fit's rows (the load's rotation, summed from the arcs)

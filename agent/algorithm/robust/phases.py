@@ -40,7 +40,9 @@
   _keep_turning`: the push, off the COM, swings the turn); the push runs in stages
   (:meth:`_push_stage`), Step 7's in translation, where the torque ``−n ẑ_C × c`` makes the
   common force ``c`` act through the COM that Step 5 found rather than the contacts'
-  centroid, and the turn is damped (:meth:`RobustPhases._not_turning`); with
+  centroid, and the turn is damped (:meth:`RobustPhases._not_turning`), and the common force
+  goes along ``f`` and across it (:meth:`RobustPhases._translation_push`: the turn the team
+  holds against then measures ``z_C`` again, :mod:`agent.algorithm.robust.hold_fit`); with
   ``push_damping = b`` each robot also adds ``−b ṗ̂_G``, the damping of the centroid's velocity
   at the estimation instant (which every robot estimates alike), so that a light load's speed
   stays within about ``f/b`` and a heavy one's drift dies out (Steps 5 and 7 take the force as
@@ -136,6 +138,11 @@ PUSH_HEADROOM = 0.5
 """The push's common force is at most this share of ``max_force``: Step 7's stage adds to it
 the forces that move its line of action to the COM and damp the turn and the drift, which the
 fits take as applied (a common force at ``max_force`` left them none)."""
+ACROSS_SCALE = 2.0 / math.sqrt(5.0)
+"""Step 7's push along ``f`` and across it (``s'(t) Q f`` at half the period) are both this
+share of the push: the load's speed swings by ``n f T / 2m`` along ``f`` and half that
+across, so that the two together swing it no faster than the push along ``f`` alone,
+``√(1 + 1/4) ACROSS_SCALE = 1``."""
 LEVELS_PER_DOUBLING = 4
 """Step 4's ``F`` and the push's ``f`` are their settings times ``2^(q/4)``, ``q`` the level
 the team agreed on (the largest any robot asked for, :mod:`agent.algorithm.coordination`):
@@ -396,6 +403,20 @@ class RobustPhases(PhaseMachine):
             return self._pushing(k, own, velocity, push)
         return self._pushing(k, own, velocity, push, keep=False)
 
+    def _translation_push(self, k: int, push: Vec2) -> Vec2:
+        """Step 7's common force at tick ``k``, whose part along ``f`` is ``push``: that part
+        and ``s'(t) Q f`` (``s'`` reversed at half the push's period, :meth:`_flip_sign`), both
+        scaled by :data:`ACROSS_SCALE`, or less to keep their sum within
+        :data:`PUSH_HEADROOM` of ``max_force``: the load's turn then measures both components
+        of ``z_C`` (:mod:`agent.algorithm.robust.hold_fit`)."""
+        fx, fy = self.push
+        size = math.hypot(fx, fy)
+        most = PUSH_HEADROOM * self.tuning.max_force
+        scale = min(ACROSS_SCALE, most / (math.sqrt(2.0) * size)) if size > 0.0 else 1.0
+        since = k - self.entered.get(Phase.PUSH, k) - self.translate_from
+        across = scale * self._flip_sign(since, self.push_flip_ticks // 2)
+        return (scale * push[0] - across * fy, scale * push[1] + across * fx)
+
     def _spin_up(self, k: int, own: OwnEstimates) -> Vec2:
         """The torque ``s_ω (τ̂_c + Ĵ (ω* − |ω̂|) / spin_up_s)`` as eq. (14)'s forces, within
         Step 4's torque ``±k w`` (each way: the turn brought up to ``pendulum_spin`` against the
@@ -438,6 +459,7 @@ class RobustPhases(PhaseMachine):
         b = self.tuning.robust.push_damping
         damped = b > 0.0 and own.velocity is not None
         damping = (0.0, 0.0)
+        nominal = push  # the fits' s(t) f: what the robot adds beyond it is recorded
         if damped:
             # ṗ_G = ṗ_Ci − ω Q z_i, all three at the estimation instant: every robot then adds
             # the same force, as Steps 5 and 7 take it. (This tick's ṗ_Ci with the instant's ω
@@ -447,29 +469,33 @@ class RobustPhases(PhaseMachine):
             damping = (-b * (v[0] + omega * z[1]), -b * (v[1] - omega * z[0]))
         most = self.tuning.max_force
         if not keep:  # the common force first, the torque within what max_force leaves
+            push = self._translation_push(k, push)
             common = saturate((push[0] + damping[0], push[1] + damping[1]), most)
-            if damped:
-                self._damping[k] = (common[0] - push[0], common[1] - push[1])
-            turning = self._not_turning(k, own, common)
+            self._added[k] = (common[0] - nominal[0], common[1] - nominal[1])
+            turning, torque = self._not_turning(k, own, common)
             part = _within(common, turning, most)
+            self._torque[k] = part * torque
             return (common[0] + part * turning[0], common[1] + part * turning[1])
         turning = self._keep_turning(k, own, record=True)
         push = (push[0] + turning[0], push[1] + turning[1])
         if not damped:
             return push
         force = saturate((push[0] + damping[0], push[1] + damping[1]), most)
-        self._damping[k] = (force[0] - push[0], force[1] - push[1])
+        self._added[k] = (force[0] - push[0], force[1] - push[1])
         return force
 
-    def _not_turning(self, k: int, own: OwnEstimates, common: Vec2) -> Vec2:
+    def _not_turning(self, k: int, own: OwnEstimates, common: Vec2) -> tuple[Vec2, float]:
         """Step 7's stage: ``(τ/w) z_i⊥`` (eq. 14's form, no net force) with
         ``τ = −n ẑ_C × c − b ω̂ w``: the team's common force ``c`` (the push and its damping),
         which acts at the contacts' centroid, ``n ẑ_C × c`` about the COM, then acts through the
         COM that Step 5 found, and ``turn_damping = b`` damps what turn is left, so that the
-        load translates (``z_i`` and ``ẑ_C`` turned to the middle of tick ``k``)."""
+        load translates (``z_i`` and ``ẑ_C`` turned to the middle of tick ``k``); and
+        ``−n ẑ_C × c`` (N m), which :meth:`_pushing` records, as applied, for the team's (Step
+        7's ``z_C`` from the turn it holds, :mod:`agent.algorithm.robust.hold_fit`, which
+        takes the damping from the angle: every robot's ``ω̂`` has its own noise)."""
         w = self.n * own.mean_square_offset
         if not w > 0.0:
-            return (0.0, 0.0)
+            return (0.0, 0.0), 0.0
         z_c = own.com_offset_now
         push_torque = 0.0
         if z_c is not None:
@@ -477,7 +503,7 @@ class RobustPhases(PhaseMachine):
             push_torque = self.n * (z_c[0] * common[1] - z_c[1] * common[0])
         b = self.tuning.robust.turn_damping
         gain = -b * (own.omega or 0.0) - push_torque / w
-        return inertia_force(gain, self._turned_centroid(k, own))
+        return inertia_force(gain, self._turned_centroid(k, own)), -push_torque
 
     def _keep_turning(self, k: int, own: OwnEstimates, record: bool = False) -> Vec2:
         """``(τ/w) z_i⊥``, ``z_i`` turned to the middle of tick ``k``, with the team's torque

@@ -24,14 +24,20 @@ from agent.algorithm.pipeline import EstimationPipeline
 from agent.algorithm.robust.arc_fit import ArcRelativePosition
 from agent.algorithm.robust.com_fit import ComFit
 from agent.algorithm.robust.drive_gain import DriveGain
+from agent.algorithm.robust.hold_fit import HoldFit
 from agent.algorithm.robust.inertia_fit import InertiaFit
 from agent.algorithm.robust.load_change import ProbeFit
 from agent.algorithm.robust.mass_fit import MassFit
 from agent.algorithm.robust.rotation import RotationConsensus, own_turn, turn_weight, wrapped
 from agent.algorithm.robust.team_mass import disagreement, inputs, mass_input, team_mass
-from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, FitShares, packed
+from agent.algorithm.robust.uncertainty import (
+    PUBLISHED_VARIANCE,
+    STEP5_COM_VARIANCE,
+    FitShares,
+    packed,
+)
 from agent.algorithm.tuning import AgentConfig
-from agent.platform.geometry import Vec2, largest_std, turned_covariance
+from agent.platform.geometry import Vec2, largest_std, rotate, turned_covariance
 from agent.platform.protocol import Estimates
 
 if TYPE_CHECKING:
@@ -44,6 +50,20 @@ STUCK_TURN = 0.02
 held by the floor: the team's torque does not break it away, so nothing more can be
 estimated, and the robot stops pushing and says so."""
 STUCK_FLIPS = 2
+TEAM_COM_SIGMAS = 3.0
+"""The team's mean ``ẑ_C`` is published once within this many of this robot's own standard
+deviations (along its least certain axis) of its own (:meth:`RobustPipeline.com_offset`)."""
+SWUNG_TURN = 0.3
+"""rad: a Step 7 stage in which the load turned back by more than this from its furthest turn
+either way (:attr:`~agent.algorithm.robust.hold_fit.HoldFit.swung`) swung under the push:
+Step 5's ``ẑ_C`` was too far off for the push to act through the COM, and the mass fit, whose
+model is a load that translates, is not backed: no ``m̂`` nor ``μ̂`` is published from it.
+On the noise benchmark's floor (``heft bench noise --generated 40 --coulomb-range 0.005
+0.03``, 2026-11-28) generated load 47 swung by 0.66 rad (Step 5 had left its ``ẑ_C`` 27 cm
+off; its ``m̂`` was 56 % off behind a published 95 % interval of about ±28 %); generated load
+11, the next, by 0.12 rad, its ``m̂`` 1.5 % off within its interval. A turn one way is no
+swing: without noise, generated load 1 (``heft bench generated``) began the stage turning at
+0.19 rad/s, and turned 0.18 rad in it."""
 PUBLISHED_FROM = 0.25
 """The relative standard deviation at most which ``m̂`` and ``Ĵ`` are published: a fit's
 first instants say nothing yet (Step 7's first mass is typically 11 ± 11 kg on the paper's
@@ -66,6 +86,8 @@ class RobustPipeline(EstimationPipeline):
         """This robot's torque in Step 1's spin-up, the input of the team's mean."""
         self._kick_input = config.tuning.kick_force
         """This robot's kick size in Step 1, the input of the team's mean."""
+        self._com_input: Vec2 | None = None
+        """This robot's own ``ẑ_C`` (:meth:`_own_com`), the input of the team's."""
         super().__init__(config, neighbours)
         self.rotation = RotationConsensus(len(neighbours), config.n)
         """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
@@ -75,6 +97,8 @@ class RobustPipeline(EstimationPipeline):
         """Once done, the current probe's fits (:mod:`agent.algorithm.robust.load_change`)."""
         self.probe_began = -1
         """The first tick of :attr:`probe`'s probe."""
+        self.hold: HoldFit | None = None
+        """Step 7's refinement of ``z_C`` (:meth:`_held`), once its stage has begun."""
         self._turns: deque[tuple[float, float]] = deque()
         """``(t, θ)`` over Step 4's last :data:`STUCK_FLIPS` flips (is the load stuck?)."""
 
@@ -96,10 +120,53 @@ class RobustPipeline(EstimationPipeline):
         return weighted / xi if xi > 0.0 and weighted > 0.0 else 1.0
 
     def com_offset(self, alpha: float) -> Vec2 | None:
-        """``z_C`` corrected for the drives' gains. The torque of the push about the COM is
-        ``n (h + ḡ z_C) × f`` (:mod:`agent.algorithm.robust.team_mass`), so the fit (with the
+        """``z_C`` as published: the team's mean of the robots' own (:meth:`_own_com`), the
+        consensus ``mean_weighted_com / mean_com_weight`` (each robot's fit has nearly the
+        same information, and their errors differ by each robot's own noise), once that is
+        within :data:`TEAM_COM_SIGMAS` standard deviations of this robot's own (its fit's,
+        scaled as Step 5's, :data:`~agent.algorithm.robust.uncertainty.STEP5_COM_VARIANCE`:
+        a consensus whose inputs have just appeared is not yet a mean), else its own."""
+        own = self._own_com(alpha)
+        if own is None:
+            return None
+        c = self.consensus
+        weight = c["mean_com_weight"]
+        if not weight > 0.0:
+            return own
+        now = self.angle - self.push_angle
+        team = rotate(c["mean_weighted_com"], alpha - now)
+        team = (team[0] / weight, team[1] / weight)
+        fit = self._com_fit
+        cov = None if fit is None else fit.covariance
+        if cov is None:
+            return own
+        (a, b), (_, d) = cov
+        limit = TEAM_COM_SIGMAS * math.sqrt(STEP5_COM_VARIANCE) * largest_std(a, b, d)
+        if math.hypot(team[0] - own[0], team[1] - own[1]) > limit:
+            return own
+        return team
+
+    @property
+    def _com_fit(self) -> ComFit | None:
+        """The fit of this robot's own ``ẑ_C``: Step 7's once its stage has refined Step 5's
+        (:mod:`agent.algorithm.robust.hold_fit`), else Step 5's."""
+        hold = self.hold
+        return self.com if hold is None or hold.estimate is None else hold
+
+    def _own_com(self, alpha: float) -> Vec2 | None:
+        """This robot's own ``ẑ_C`` after the rotation ``alpha`` since the push began
+        (:attr:`_com_fit`'s), corrected for the drives' gains (:meth:`_corrected`)."""
+        fit = self._com_fit
+        return None if fit is None else self._corrected(fit.com_offset(alpha))
+
+    def _push_offset(self, alpha: float) -> Vec2 | None:
+        """Step 5's ``z_C``, corrected for the drives' gains (:meth:`_corrected`)."""
+        return self._corrected(super().com_offset(alpha))
+
+    def _corrected(self, z_c: Vec2 | None) -> Vec2 | None:
+        """``z_C`` from the offset that the fits find. The torque of the push about the COM is
+        ``n (h + ḡ z_C) × f`` (:mod:`agent.algorithm.robust.team_mass`), so a fit (with the
         corrected ``Ĵ``) finds ``c' = h + ḡ z_C``, and ``z_C = (c' − h) / ḡ``."""
-        z_c = super().com_offset(alpha)
         if z_c is None:
             return z_c
         h, gain = self.consensus["mean_gain_offset"], self.consensus["mean_gain"]
@@ -160,11 +227,17 @@ class RobustPipeline(EstimationPipeline):
 
     def _inputs(self, x: Vec2) -> Sequence[float]:
         return inputs(
-            x, self.drive.estimate, self._mass_input, self._torque_input, self._kick_input
+            x,
+            self.drive.estimate,
+            self._mass_input,
+            self._torque_input,
+            self._kick_input,
+            self._com_input,
         )
 
     def _before_consensus(self, schedule: Schedule) -> None:
         self._mass_input = mass_input(*self._own_mass())  # the input of the team's (Step 7)
+        self._com_input = self._own_com(self.angle - self.push_angle)
         self._torque_input = schedule.spin_torque
         self._kick_input = schedule.kick_level
 
@@ -259,17 +332,41 @@ class RobustPipeline(EstimationPipeline):
     ) -> None:
         self.com.update(alpha, sign, span, added=added, spin=self._spin, torque=torque)
 
+    def _held(self, alpha: float, sign: float, span: float, added: Vec2, torque: float) -> None:
+        """Step 7's refinement of ``z_C`` (:class:`~agent.algorithm.robust.hold_fit.HoldFit`),
+        begun at the stage's first instant from Step 5's estimate and its fit's covariance
+        scaled by :data:`~agent.algorithm.robust.uncertainty.STEP5_COM_VARIANCE`. The team's
+        holding torque is this robot's, ``−n ẑ_C × c`` and the damping ``−b ω w``
+        (``turn_damping``), scaled by the drives' torque gain."""
+        com = self.com
+        if self.hold is None:
+            c, cov = com.estimate, com.covariance
+            if c is None or cov is None:
+                return
+            k = STEP5_COM_VARIANCE
+            (a, b), (_, d) = cov
+            prior = ((k * a, k * b), (k * b, k * d))
+            self.hold = HoldFit(self.n, 1.0 / com.inverse_moment, com.force, self.lag, c, prior)
+            self.hold.update(alpha, 1.0, span)  # starts the integrals
+            return
+        omega = self.omega or 0.0
+        radius = math.sqrt(self.mean_square_offset)
+        drag = HoldFit.drag(omega, self.com_velocity or (0.0, 0.0), radius)
+        gain = self._torque_gain
+        damping = gain * self.tuning.robust.turn_damping * self.n * self.mean_square_offset
+        self.hold.update(
+            alpha, sign, span, added=added, drag=drag, torque=torque * gain, damping=damping
+        )
+
     def _new_mass(self, schedule: ProbeSchedule) -> MassFit:
         """Step 7's fit, the offset it is given as uncertain as Step 5's fit makes ``ẑ_C``: the
-        largest standard deviation of that fit's covariance, scaled by ``contact_to_com``'s
-        calibrated factor (``ẑ_C``'s share of the published ``contact_to_com`` covariance, to
-        which :meth:`_reported` adds ``z_i``'s, ``Ĵ``'s and the gains')."""
+        largest standard deviation of that fit's covariance, scaled by Step 5's calibrated
+        factor (:data:`~agent.algorithm.robust.uncertainty.STEP5_COM_VARIANCE`)."""
         offset_std = 0.0
         cov = self.com.covariance if self.com is not None else None
         if cov is not None:
             (a, b), (_, d) = cov
-            scale = PUBLISHED_VARIANCE["contact_to_com"]
-            offset_std = math.sqrt(scale) * largest_std(a, b, d)
+            offset_std = math.sqrt(STEP5_COM_VARIANCE) * largest_std(a, b, d)
         return MassFit(self.n, schedule.push, self.forgetting, self.lag, offset_std=offset_std)
 
     def _update_mass(
@@ -295,6 +392,7 @@ class RobustPipeline(EstimationPipeline):
     def _forget_load(self) -> None:
         super()._forget_load()
         self.probe = None
+        self.hold = None
 
     def _torque_scale_std(self) -> float:
         """The relative standard deviation of ``w = Σ‖z_i‖²``, which scales the torque Step 4
@@ -360,12 +458,16 @@ class RobustPipeline(EstimationPipeline):
     def estimates(self, robot: int, schedule) -> Estimates:
         """The estimates (:meth:`EstimationPipeline.estimates`), but ``m̂`` and ``Ĵ`` only once
         known to :data:`PUBLISHED_FROM` of themselves: not yet, rather than a number that
-        means nothing."""
+        means nothing; and neither ``m̂`` nor ``μ̂`` from a Step 7 stage in which the load
+        swung (:data:`SWUNG_TURN`)."""
         found = super().estimates(robot, schedule)
         hidden = {}
         for key in ("mass", "moment"):
             value, std = getattr(found, key), getattr(found, key + "_std")
             if value is not None and not (std is not None and std <= PUBLISHED_FROM * abs(value)):
+                hidden[key] = hidden[key + "_std"] = None
+        if self.hold is not None and self.hold.swung > SWUNG_TURN:
+            for key in ("mass", "coulomb"):
                 hidden[key] = hidden[key + "_std"] = None
         return dataclasses.replace(found, **hidden) if hidden else found
 
@@ -438,12 +540,13 @@ class RobustPipeline(EstimationPipeline):
                 scale = math.sqrt(PUBLISHED_VARIANCE[key])
                 out[key], out[key + "_std"] = found[0], found[1] * scale
         com_cov = None
-        if contact_to_com is not None and edges and self.com is not None:
-            com_cov = self.com.covariance
+        fit = self._com_fit
+        if contact_to_com is not None and edges and fit is not None:
+            com_cov = fit.covariance
         if com_cov is not None:
             alpha = self.angle - self.push_angle
             (a, b), (_, d) = turned_covariance(com_cov, alpha)
-            c = self.com.com_offset(alpha)
+            c = fit.com_offset(alpha)
             rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
             count = len(edges)
             # σ_g² w / 2n²
@@ -451,6 +554,16 @@ class RobustPipeline(EstimationPipeline):
             xx = sum(e[0] for e in edges.values()) / count + a + rel2 * c[0] * c[0] + weighted
             xy = sum(e[1] for e in edges.values()) / count + b + rel2 * c[0] * c[1]
             yy = sum(e[2] for e in edges.values()) / count + d + rel2 * c[1] * c[1] + weighted
-            scale = PUBLISHED_VARIANCE["contact_to_com"]
+            scale = self._com_variance_factor
             out["contact_to_com_cov"] = (scale * xx, scale * xy, scale * yy)
         return out
+
+    @property
+    def _com_variance_factor(self) -> float:
+        """The factor on the variance of this robot's own ``ẑ_C`` (and its ``contact_to_com``):
+        ``contact_to_com``'s in :data:`~agent.algorithm.robust.uncertainty.PUBLISHED_VARIANCE`
+        once Step 7 has refined it, Step 5's (:data:`~agent.algorithm.robust.uncertainty.
+        STEP5_COM_VARIANCE`) before."""
+        if self._com_fit is self.com:
+            return STEP5_COM_VARIANCE
+        return PUBLISHED_VARIANCE["contact_to_com"]

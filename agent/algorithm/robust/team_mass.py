@@ -60,16 +60,19 @@ def inputs(
     mass: tuple[float, float, float, float],
     torque: float,
     kick: float,
+    com: Vec2 | None,
 ) -> tuple[float, ...]:
     """A robot's inputs of the team's means, in declaration order
     (:data:`agent.platform.team.TEAM_QUANTITIES`): ``‖x_i‖²`` (→ ``w / n``), ``g_i``,
     ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i``, ``ι_i ln m_i``, ``ι_i (ln m_i)²``,
-    ``τ_i`` and ``A_i``, for its offsets iterate ``x``, its drive's gain, its mass input
-    (:func:`mass_input`), its torque in Step 1's spin-up
-    (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`) and its kick's size
-    (:attr:`~agent.algorithm.robust.phases.RobustPhases.kick_level`)."""
+    ``τ_i``, ``A_i``, ``ζ_i`` and ``ζ_i ẑ_C``, for its offsets iterate ``x``, its drive's
+    gain, its mass input (:func:`mass_input`), its torque in Step 1's spin-up
+    (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`), its kick's size
+    (:attr:`~agent.algorithm.robust.phases.RobustPhases.kick_level`) and its own ``ẑ_C``
+    (``None``: none yet, ``ζ_i = 0``)."""
     norm2 = x[0] * x[0] + x[1] * x[1]
-    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, *mass, torque, kick)
+    held = (0.0, 0.0, 0.0) if com is None else (1.0, com[0], com[1])
+    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, *mass, torque, kick, *held)
 
 
 def team_mass(information: float, weighted: float, own: float) -> tuple[float, float] | None:

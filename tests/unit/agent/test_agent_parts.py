@@ -23,7 +23,7 @@ from agent.algorithm.families import FAMILIES
 from agent.algorithm.inbox import HISTORY_TICKS, Inbox
 from agent.algorithm.paper.tuning import PaperTuning
 from agent.algorithm.phase_machine import PhaseMachine
-from agent.algorithm.robust.phases import TURN_STOP_SHARE
+from agent.algorithm.robust.phases import ACROSS_SCALE, PUSH_HEADROOM, TURN_STOP_SHARE
 from agent.algorithm.robust.tuning import RobustTuning
 from agent.algorithm.tuning import PAPER_REFERENCE, AgentConfig, AgentTuning, Estimators
 from agent.platform.config import from_table
@@ -339,9 +339,9 @@ def test_the_robust_push_damps_the_centroids_velocity_and_says_by_how_much():
     # at rest at the next instant: ṗ̂_G = −ω Q z_i = (0, −0.2)
     own.instant, own.velocity = 50, (0.0, 0.0)
     assert m.force(51, own, (0.3, 0.3)) == pytest.approx((0.0, 2.4))
-    assert m.mean_push_damping(50, 51) == pytest.approx((-0.2, 0.0))
-    assert m.mean_push_damping(50, 52) == pytest.approx((-0.1, 0.2))
-    assert m.mean_push_damping(60, 61) == (0.0, 0.0)  # no force commanded then: nothing added
+    assert m.mean_push_added(50, 51) == pytest.approx((-0.2, 0.0))
+    assert m.mean_push_added(50, 52) == pytest.approx((-0.1, 0.2))
+    assert m.mean_push_added(60, 61) == (0.0, 0.0)  # no force commanded then: nothing added
     own.velocity = None  # no velocity at the instant: nothing to damp
     assert m.force(52, own, (0.3, 0.3)) == pytest.approx((0.0, 2.0))
     paper = machine(push_damping=2.0, push_min_force=2.0, push_direction=(0.0, 1.0))
@@ -350,8 +350,9 @@ def test_the_robust_push_damps_the_centroids_velocity_and_says_by_how_much():
 
 
 def test_the_translating_push_acts_through_the_estimated_com_and_damps_the_turn():
-    """Step 7's stage: the team's common force (the push and its damping) acts at the
-    contacts' centroid; each robot adds ``(τ/w) z_i⊥``, ``τ = −n ẑ_C × c − b ω̂ w``, so that
+    """Step 7's stage: the team's common force (the push along ``f`` and across it, and its
+    damping) acts at the contacts' centroid; each robot adds ``(τ/w) z_i⊥``,
+    ``τ = −n ẑ_C × c − b ω̂ w``, so that
     the team's wrench about the COM that Step 5 found is the common force and the turn's
     damping alone, whatever ``ẑ_C``."""
     n, z_c, omega, b = 3, (0.3, -0.2), 0.4, 4.0
@@ -380,8 +381,15 @@ def test_the_translating_push_acts_through_the_estimated_com_and_damps_the_turn(
         own.velocity = (-omega * (z[1] + z_c[1]), 0.1 + omega * (z[0] + z_c[0]))
         lead = omega * 1.5 * DT  # z_i and ẑ_C turned to the middle of tick k
         forces.append((rotate(z, lead), m.force(k, own, own.velocity)))
-        # the common force: the push, and −b ṗ̂_G with ṗ̂_G = ṗ_C + ω Q z_C
-        common = (2.0 * omega * z_c[1], m.push_sign(k) * 2.0 - 2.0 * (0.1 + omega * z_c[0]))
+        # the common force: the push along f and across it (s'(t) Q f, s' reversed at half
+        # the period), and −b ṗ̂_G with ṗ̂_G = ṗ_C + ω Q z_C; what is beyond s(t) f recorded
+        r, sign = ACROSS_SCALE, m.push_sign(k)
+        across = r * m._flip_sign(0, m.push_flip_ticks // 2)  # the stage's first tick: +
+        damping = (2.0 * omega * z_c[1], -2.0 * (0.1 + omega * z_c[0]))
+        common = (-2.0 * across + damping[0], r * sign * 2.0 + damping[1])
+        assert m.mean_push_added(k, k + 1) == pytest.approx(
+            (common[0], common[1] - sign * 2.0), abs=1e-12
+        )
     arm = rotate(z_c, lead)
     net = (sum(f[0] for _, f in forces), sum(f[1] for _, f in forces))
     torque = sum(cross((z[0] + arm[0], z[1] + arm[1]), f) for z, f in forces)
@@ -393,7 +401,7 @@ def test_the_translating_push_keeps_its_common_force_whole_within_max_force():
     """Where ``max_force`` cannot give the common force and the torque's forces both, the
     common force (which Step 7's fit takes as commanded) is applied whole, the torque's
     forces scaled down to what is left."""
-    z, z_c, most = (-0.9, 0.1), (0.3, -0.2), 3.2
+    z, z_c, most = (-0.9, 0.1), (1.2, -0.8), 3.2
     m = machine(
         estimator=Estimators.ROBUST,
         max_force=most,
@@ -410,9 +418,13 @@ def test_the_translating_push_keeps_its_common_force_whole_within_max_force():
     omega = 1.5
     own.instant, own.omega, own.com_offset_now, own.velocity = k - 1, omega, z_c, (0.0, 0.0)
     force = m.force(k, own, own.velocity)
-    damping = m.mean_push_damping(k, k + 1)
-    common = (damping[0], m.push_sign(k) * 1.6 + damping[1])
-    assert damping == pytest.approx((-2.0 * omega * z[1], 2.0 * omega * z[0]))  # −b ṗ̂_G, whole
+    # the push along f and across it, scaled to keep their sum within PUSH_HEADROOM of
+    # max_force, and −b ṗ̂_G whole
+    r = min(ACROSS_SCALE, PUSH_HEADROOM * most / (math.sqrt(2.0) * 1.6))
+    sign, across = m.push_sign(k), r * m._flip_sign(0, m.push_flip_ticks // 2)
+    damping = (-2.0 * omega * z[1], 2.0 * omega * z[0])
+    common = (-1.6 * across + damping[0], r * sign * 1.6 + damping[1])
+    assert m.mean_push_added(k, k + 1) == pytest.approx((common[0], common[1] - sign * 1.6))
     assert math.hypot(*force) == pytest.approx(most)
     turning = (force[0] - common[0], force[1] - common[1])
     assert math.hypot(*turning) > 0.1

@@ -109,8 +109,8 @@ SHARE_FLOWS = Share(
         mean_gain_square_offset=2.5,
     ),
     flows=(
-        (2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3, 4.0, 20.0, 6.4, 10.2, 1.5, 3.0),
-        (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3, 0.0, -1.0, 0.0, 0.0, -0.25, 0.0),
+        (2, 0.5, -0.25, 1.0, 0.02, 0.1, -0.2, 0.3, 4.0, 20.0, 6.4, 10.2, 1.5, 3.0, 0.5, 0.1, -0.2),
+        (4, -3.0, 2.0, 0.0, -0.01, 0.0, 0.0, 1e-3, 0.0, -1.0, 0.0, 0.0, -0.25, 0.0, 0.0, 0.0, 0.0),
     ),
 )
 CLOCK = Clock(tick=42, time_s=0.42)
@@ -346,6 +346,8 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
             mean_weighted_square_log_mass=numbers,
             mean_spin_torque=numbers,
             mean_kick_level=numbers,
+            mean_com_weight=st.floats(0.0, 1.0),
+            mean_weighted_com=pairs,
             rotation=st.floats(-math.pi, math.pi),
             mean_turn_variance=st.floats(0.0, 100.0),
         ),

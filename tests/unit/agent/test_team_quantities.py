@@ -71,7 +71,10 @@ def inputs_with_temperature(robot: int):
 
     def inputs(x):
         norm2 = x[0] * x[0] + x[1] * x[1]
-        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, TEMPERATURES[robot])
+        return (
+            *(norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+            TEMPERATURES[robot],
+        )
 
     return inputs
 
