@@ -179,7 +179,7 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
     TeamQuantity(
         "mean_com_weight",
         1,
-        1.0,
+        MAX_GAIN,  # (a mean's states overshoot its inputs' range while they converge)
         Averaging.MEAN,
         doc="ζ_i → the share of robots with a z_C of their own (robust Steps 5 and 7),"
         " input 1 or 0",

@@ -156,3 +156,43 @@ def test_the_declared_quantities_are_the_shares_fields_and_domains() -> None:
         decode(
             Share, encode(Share(1, 2, (0.0, 0.0), 1, 1, Barrier(), ConsensusState(rotation=3.2)))
         )
+
+
+def test_a_mean_whose_inputs_appear_one_robot_at_a_time_stays_on_the_wire() -> None:
+    """The robots' ``ẑ_C`` reach the team's mean as each robot gets one (``ζ_i`` from 0 to 1, a
+    tick apart): the states overshoot the inputs' range while they converge, and every share
+    must still pass the domain checks (a bound of 1 on ``mean_com_weight`` refused them, and a
+    team over Zenoh stalled)."""
+    wire = ShareWire(TEAM_QUANTITIES)
+    tick = [0]
+
+    def inputs_of(robot: int):
+        def inputs(x):
+            norm2 = x[0] * x[0] + x[1] * x[1]
+            held = (1.0, 0.3, -0.2) if tick[0] >= 3 * robot else (0.0, 0.0, 0.0)
+            return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *held)
+
+        return inputs
+
+    team = {i: TeamConsensus(i, neighbours_of(i), inputs_of(i)) for i in CONTACTS}
+    frames = {i: StillLoad(i) for i in CONTACTS}
+    heard: dict[int, dict[int, Share]] = {i: {} for i in CONTACTS}
+    most = 0.0
+    for k in range(1, 200):
+        tick[0] = k
+        sent = {}
+        for i, c in team.items():
+            share = Share(i, k, (0.0, 0.0), c.degree, k - 1, Barrier(), c.state, c.shared_flows())
+            wire.check(share)
+            sent[i] = wire.unpack(wire.pack(share))
+            most = max(most, c["mean_com_weight"])
+        for i, c in team.items():
+            for j in c.neighbours:
+                heard[i][j] = sent[j]
+            frames[i].instant = k
+            c.update(0.0, heard[i], frames[i])
+    assert most > 1.0  # overshot
+    for c in team.values():
+        assert c["mean_com_weight"] == pytest.approx(1.0, abs=1e-6)
+        weighted = c["mean_weighted_com"]
+        assert weighted == pytest.approx((0.3, -0.2), abs=1e-6)
