@@ -84,7 +84,7 @@ class LeastSquares:
 
         ``E`` picking the two parameters, with ``σ̂² = RSS(p̂) / (N − p)`` the rows' own mean
         square residual at ``p̂`` (``RSS(p) = Σb² − 2 pᵀ v + pᵀ M p``), found by fixed-point
-        iteration from a negligible weight of the rows' (:data:`PRIOR_PASSES` passes). The
+        iteration from a negligible weight of the prior's (:data:`PRIOR_PASSES` passes). The
         rows need not determine every parameter: the prior completes them. The
         :class:`Solution`'s ``inverse`` is that of the combined matrix times ``scale σ̂²``, so
         that its :meth:`~Solution.covariance` ``(scale)`` is the posterior's. ``None`` with
@@ -120,8 +120,9 @@ class LeastSquares:
 
 
 PRIOR_PASSES = 3
-"""Passes of :meth:`LeastSquares.solve_with_prior`'s fixed point on ``σ̂²``: the first from a
-negligible weight of the rows' (:data:`_FIRST_WEIGHT`), each next at the last ``σ̂²``."""
+"""Passes of :meth:`LeastSquares.solve_with_prior`'s fixed point on ``σ̂²``: the first with the
+prior's weight a negligible share of the rows' (:data:`_FIRST_WEIGHT`), each next at the last
+``σ̂²``."""
 _FIRST_WEIGHT = 1e-9
 
 
@@ -162,7 +163,11 @@ class RunFit:
     @property
     def _scale(self) -> float:
         """The factor on the least-squares covariance (see the class docstring)."""
-        return self.correlation_time * self._solution.rows / max(self.t, 1e-9) or 1.0
+        return self._scale_for(self._solution.rows)
+
+    def _scale_for(self, rows: float) -> float:
+        """``correlation_time × rows / t`` (1 for an uncorrelated fit)."""
+        return self.correlation_time * rows / max(self.t, 1e-9) or 1.0
 
 
 class ReciprocalFit(RunFit):
