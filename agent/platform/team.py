@@ -55,6 +55,8 @@ class Averaging(enum.Enum):
     LEVEL = "level"
     """Consensus on a level that every robot also integrates on its own (the load's rotation,
     :mod:`agent.algorithm.robust.rotation`): sent modulo ``2π``."""
+    OWN = "own"
+    """Not averaged: the sender's own value, which its neighbours weigh its level by."""
 
 
 FLOWING = (Averaging.OFFSETS, Averaging.MEAN)
@@ -198,6 +200,14 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
         math.pi,
         Averaging.LEVEL,
         doc="θ_i, the load's rotation at the sender's instant, modulo 2π (robust)",
+    ),
+    TeamQuantity(
+        "rotation_weight",
+        1,
+        MAX_DISTANCE * MAX_DISTANCE,
+        Averaging.OWN,
+        doc="w_i, the weight of the sender's turns in the team's level: the spread D_i of its"
+        " neighbourhood's contacts (m², robust)",
     ),
     TeamQuantity(
         "mean_turn_variance",

@@ -101,6 +101,10 @@ class ArcRelativePosition:
         """The load's rotation (rad) between the last two samples used."""
         self.last_dt = 0.0
         """s: the interval between the last two samples used."""
+        self.step: Vec2 = (0.0, 0.0)
+        """``∫ż_ij dt`` between the last two samples used (the trapezoid)."""
+        self.arc: Vec2 = (0.0, 0.0)
+        """``s − c``: ``z_ij`` on the arc at the last sample used once the circle is known."""
         self.fit = LeastSquares(3, forgetting)
         """Kåsa's rows ``[2 s_x, 2 s_y, 1] (c_x, c_y, d) = ‖s‖²``."""
         self.direction: float | None = None
@@ -152,13 +156,15 @@ class ArcRelativePosition:
             second[1] = lam * second[1] + 1.0
             self.noise = second[0] / (12.0 * second[1])
         self.s = s = (sx, sy)
+        self.step = (sx - bx, sy - by)
         self._before, self.zdot = last, zdot
         self.last_dt = dt
         self._add(s)
         fit = self._solution
         if fit is not None:  # both ends about the same centre: its own refits are no turn
             cx, cy, _ = fit.estimate
-            self.last_turn = angle_between((bx - cx, by - cy), (sx - cx, sy - cy))
+            self.arc = arc = (sx - cx, sy - cy)
+            self.last_turn = angle_between((bx - cx, by - cy), arc)
             if follow:
                 self.follow(self.last_turn)
         else:
@@ -222,6 +228,12 @@ class ArcRelativePosition:
         if std > 0.5 * r:  # the circle not yet determined
             return
         self._solution, self.distance, self.distance_std = solution, r, std
+
+    @property
+    def speed2(self) -> float:
+        """``‖ż_ij‖²`` at the last sample used (0 before any)."""
+        zdot = self.zdot
+        return 0.0 if zdot is None else zdot[0] * zdot[0] + zdot[1] * zdot[1]
 
     @property
     def _scale(self) -> float:

@@ -28,7 +28,14 @@ from agent.algorithm.robust.hold_fit import HoldFit
 from agent.algorithm.robust.inertia_fit import InertiaFit
 from agent.algorithm.robust.load_change import ProbeFit
 from agent.algorithm.robust.mass_fit import MassFit
-from agent.algorithm.robust.rotation import RotationConsensus, own_turn, turn_weight, wrapped
+from agent.algorithm.robust.rotation import (
+    MIN_NOISE,
+    RotationConsensus,
+    neighbourhood_turn,
+    own_turn,
+    turn_weight,
+    wrapped,
+)
 from agent.algorithm.robust.team_mass import disagreement, inputs, mass_input, team_mass
 from agent.algorithm.robust.uncertainty import (
     PUBLISHED_VARIANCE,
@@ -39,6 +46,7 @@ from agent.algorithm.robust.uncertainty import (
 from agent.algorithm.tuning import AgentConfig
 from agent.platform.geometry import Vec2, largest_std, rotate, turned_covariance
 from agent.platform.protocol import Estimates
+from agent.platform.team import MAX_DISTANCE
 
 if TYPE_CHECKING:
     from agent.algorithm.inbox import Inbox
@@ -91,6 +99,8 @@ class RobustPipeline(EstimationPipeline):
         super().__init__(config, neighbours)
         self.rotation = RotationConsensus(len(neighbours), config.n)
         """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
+        self._rotation_weight = 0.0
+        """``w_i``: the weight of this robot's last turn (:meth:`_own_turn`), sent."""
         self.lag = 0.0
         """``τ_d`` (s), the drives' lag from Step 4's fit (Steps 5 and 7)."""
         self.probe: ProbeFit | None = None
@@ -250,26 +260,25 @@ class RobustPipeline(EstimationPipeline):
         direction filter then follows it."""
         fallback = (self.omega or 0.0) * interval
         edges = self.edges
-        fresh = []
-        turns = []
-        for j, z in zdots.items():
-            edge = edges[j]
-            if edge.moving and abs(edge.last_dt - interval) < 1e-9:
-                fresh.append(edge)
-                speed2 = z[0] * z[0] + z[1] * z[1]  # the radius is known once the circle is
-                weight = turn_weight(
-                    radius=edge.distance, speed2=speed2, noise=edge.noise, dt=interval
-                )
-                turns.append((edge.last_turn, weight))
-        own = own_turn(turns)
+        fresh = [
+            edges[j] for j in zdots if edges[j].moving and abs(edges[j].last_dt - interval) < 1e-9
+        ]
+        own, weight = self._own_turn(fresh, interval)
         heard = (
-            (j, s.degree, s.instant, s.consensus.rotation, s.consensus.mean_turn_variance)
+            (
+                j,
+                s.degree,
+                s.instant,
+                s.consensus.rotation,
+                s.consensus.mean_turn_variance,
+                s.consensus.rotation_weight,
+            )
             for j, s in inbox.latest.items()
             if j in edges
         )
         turn, variance = (fallback, None) if own is None else own
         rotation = self.rotation
-        turn = rotation.update(self.instant, turn, variance, heard, self._angle_at.get)
+        turn = rotation.update(self.instant, turn, variance, heard, self._angle_at.get, weight)
         variance = rotation.turn_variance
         for j in zdots:
             edge = edges[j]
@@ -278,6 +287,40 @@ class RobustPipeline(EstimationPipeline):
             else:
                 edge.follow(edge.last_turn)
         return turn
+
+    def _own_turn(
+        self, fresh: list[ArcRelativePosition], interval: float
+    ) -> tuple[tuple[float, float] | None, float]:
+        """``((δ_i, Var(δ_i)), w_i)`` from the ``fresh`` edges (sampled over the whole
+        interval): the turn of this robot's neighbourhood fitted with its translation once
+        every one's ``ẑ_ij`` is known (:func:`~agent.algorithm.robust.rotation.
+        neighbourhood_turn`), else the weighted mean of their own turns
+        (:func:`~agent.algorithm.robust.rotation.own_turn`); ``w_i`` is its information in the
+        fit's units, ``σ_e² Δt² / (4 Var(δ_i))`` (``D_i`` for the fit; 0: no turn)."""
+        self._rotation_weight = 0.0
+        if not fresh:
+            return None, 0.0
+        noise = max(sum(e.noise for e in fresh) / len(fresh), MIN_NOISE)
+        scale = 0.25 * noise * interval * interval
+        estimates = [e.estimate for e in fresh]
+        if None not in estimates:
+            local = neighbourhood_turn(
+                (z, e.step, e.last_turn, e.arc) for z, e in zip(estimates, fresh)
+            )
+            if local is not None:
+                turn, spread = local
+                self._rotation_weight = spread
+                return (turn, scale / spread), spread
+        own = own_turn(
+            (
+                e.last_turn,
+                turn_weight(radius=e.distance, speed2=e.speed2, noise=e.noise, dt=interval),
+            )
+            for e in fresh
+        )
+        if own is not None:
+            self._rotation_weight = scale / own[1]
+        return own, self._rotation_weight
 
     def _excite_stds(self) -> tuple[float | None, float | None]:
         """The least certain distance's, and the least certain ``z_ij``'s for ``z_i`` and
@@ -491,6 +534,7 @@ class RobustPipeline(EstimationPipeline):
         consensus = self.consensus
         consensus.set("rotation", wrapped(self.angle))
         consensus.set("mean_turn_variance", self.rotation.variance)
+        consensus.set("rotation_weight", min(self._rotation_weight, MAX_DISTANCE * MAX_DISTANCE))
         return consensus.state
 
     def _reported(self, relative: dict[int, Vec2], contact_to_com: Vec2 | None) -> dict:

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 PUBLISHED_VARIANCE = {
     "mass": 2.1,
-    "relative": 2.28,
+    "relative": 1.52,
     "contact_to_com": 0.975,
     "moment": 3.65,
-    "friction_torque": 13.6,
+    "friction_torque": 16.8,
     "coulomb": 701.0,
 }
 """Factors on the variances the robust estimators publish for the team's ``m̂``, ``z_ij``,
@@ -45,21 +45,19 @@ they are the check.
 
 ``heft bench calibrate published-variance --generated --coulomb-range 0.005 0.03 --first-seed
 80 --seeds 120`` prints each factor, the share inside with it, and the factor for 95 % inside.
-On 2026-11-28, once Step 7 refined ``ẑ_C`` by the turn it holds (:mod:`agent.algorithm.robust.
-hold_fit`) and the team published its robots' mean, the runs with the factors before (2.1,
-2.14, 2.87, 3.64, 11.7 and 701) gave these: 0.891 for ``mass``, 2.28 for ``relative`` (each
-edge; 2.64 for each robot's edges at once), 0.975 for ``contact_to_com``, 3.65 for ``moment``,
-13.6 for ``friction_torque`` and 343 for ``coulomb`` (335 s wall). ``contact_to_com``'s fell
-from 2.87 as its error did: the covariance it scales is now Step 7's fit's, whose prior is
-Step 5's scaled by :data:`STEP5_COM_VARIANCE`, and the team publishes the robots' mean, better
-than each robot's own fit. ``mass`` stays 2.1, its factor before: with the generated loads'
-0.891, ``heft bench friction`` (the paper's load on four casters, seeds 0–19) held ``m̂``'s
-truth only 85 % of the time at μ = 0.5 % and 5 %; on the generated loads' check sets 2.1
-holds it 93.2 % and 98.6 % of the time (seeds 0–39 and 40–79), 0.891 88.5 % and 92.6 %.
-``coulomb`` stays 701: with 488, ``heft bench
-friction`` (the paper's load on four casters) held the truth only 87.5 % of the time for
-``μ̂`` on a frictionless floor (μ = 0, seeds 0–19), a floor the generated loads' calibration
-does not have."""
+On 2026-11-28, once each robot's turn was its neighbourhood's least-squares rotation and the
+team weighed the robots' turns by their information (:mod:`agent.algorithm.robust.rotation`),
+the runs with the factors before (2.1, 2.28, 0.975, 3.65, 13.6 and 701) gave these: 1.27 for
+``mass``, 1.26 for ``relative`` each edge and 1.52 for each robot's edges at once (the factor
+is the latter's: the benchmark counts a robot's edges at once), 0.763 for ``contact_to_com``,
+3.66 for ``moment``, 16.8 for ``friction_torque`` and 336 for ``coulomb`` (351 s wall).
+``mass`` stays 2.1: with the generated loads' 0.891 (an earlier calibration), ``heft bench
+friction`` (the paper's load on four casters, seeds 0–19) held ``m̂``'s truth only 85 % of the
+time at μ = 0.5 % and 5 %. ``contact_to_com`` stays 0.975: with 0.763 the same sweep held its
+truth 85 % of the time at μ = 2 % and 89 % at 0.5 %, where 0.88 would hold it 90 %.
+``coulomb`` stays 701: with 488, ``heft bench friction`` held the truth only 87.5 % of the
+time for ``μ̂`` on a frictionless floor (μ = 0, seeds 0–19), a floor the generated loads'
+calibration does not have."""
 
 
 STEP5_COM_VARIANCE = 2.87

@@ -349,6 +349,7 @@ def _messages(ids, ticks, numbers, small) -> st.SearchStrategy:
             mean_com_weight=st.floats(0.0, 1.0),
             mean_weighted_com=pairs,
             rotation=st.floats(-math.pi, math.pi),
+            rotation_weight=st.floats(0.0, 1e8),
             mean_turn_variance=st.floats(0.0, 100.0),
         ),
         flows=st.lists(st.tuples(ids, *[numbers] * flow_width()), max_size=8).map(tuple),

@@ -105,7 +105,10 @@ def test_published_variance_from_known_intervals() -> None:
         {
             "mass": [Interval(1, (10.1,), (10.0,), (0.01 * k_m,))],  # 1 σ out of 1.96
             "moment": [Interval(1, (2.0 + e_j,), (2.0,), (var,))],
-            "contact_to_com": [Interval(1, (on_ellipse, 0.0), (0.0, 0.0), (var, 0.0, var))],
+            # (just inside: on the boundary, rounding decides)
+            "contact_to_com": [
+                Interval(1, (on_ellipse * (1 - 1e-9), 0.0), (0.0, 0.0), (var, 0.0, var))
+            ],
             "relative_positions": [
                 Interval(1, (1.0, 0.0), (1.0 - on_ellipse, 0.0), (var, 0.0, var)),
                 Interval(1, (0.0, 1.0), (0.0, 1.0), (var, 0.0, var)),  # no error
