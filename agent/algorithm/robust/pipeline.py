@@ -100,7 +100,8 @@ class RobustPipeline(EstimationPipeline):
         self.rotation = RotationConsensus(len(neighbours), config.n)
         """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
         self._rotation_weight = 0.0
-        """``w_i``: the weight of this robot's last turn (:meth:`_own_turn`), sent."""
+        """``w_i``: the weight of this robot's last turn (:meth:`_own_turn`), sent and used by
+        the rotation's consensus."""
         self.lag = 0.0
         """``τ_d`` (s), the drives' lag from Step 4's fit (Steps 5 and 7)."""
         self.probe: ProbeFit | None = None
@@ -263,7 +264,7 @@ class RobustPipeline(EstimationPipeline):
         fresh = [
             edges[j] for j in zdots if edges[j].moving and abs(edges[j].last_dt - interval) < 1e-9
         ]
-        own, weight = self._own_turn(fresh, interval)
+        own, self._rotation_weight = self._own_turn(fresh, interval)
         heard = (
             (
                 j,
@@ -278,7 +279,9 @@ class RobustPipeline(EstimationPipeline):
         )
         turn, variance = (fallback, None) if own is None else own
         rotation = self.rotation
-        turn = rotation.update(self.instant, turn, variance, heard, self._angle_at.get, weight)
+        turn = rotation.update(
+            self.instant, turn, variance, heard, self._angle_at.get, self._rotation_weight
+        )
         variance = rotation.turn_variance
         for j in zdots:
             edge = edges[j]
@@ -297,7 +300,6 @@ class RobustPipeline(EstimationPipeline):
         neighbourhood_turn`), else the weighted mean of their own turns
         (:func:`~agent.algorithm.robust.rotation.own_turn`); ``w_i`` is its information in the
         fit's units, ``σ_e² Δt² / (4 Var(δ_i))`` (``D_i`` for the fit; 0: no turn)."""
-        self._rotation_weight = 0.0
         if not fresh:
             return None, 0.0
         noise = max(sum(e.noise for e in fresh) / len(fresh), MIN_NOISE)
@@ -309,7 +311,6 @@ class RobustPipeline(EstimationPipeline):
             )
             if local is not None:
                 turn, spread = local
-                self._rotation_weight = spread
                 return (turn, scale / spread), spread
         own = own_turn(
             (
@@ -318,9 +319,7 @@ class RobustPipeline(EstimationPipeline):
             )
             for e in fresh
         )
-        if own is not None:
-            self._rotation_weight = scale / own[1]
-        return own, self._rotation_weight
+        return own, 0.0 if own is None else scale / own[1]
 
     def _excite_stds(self) -> tuple[float | None, float | None]:
         """The least certain distance's, and the least certain ``z_ij``'s for ``z_i`` and
