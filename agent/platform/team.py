@@ -204,7 +204,7 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
     TeamQuantity(
         "rotation_weight",
         1,
-        MAX_DISTANCE * MAX_DISTANCE,
+        MAX_DISTANCE**2,
         Averaging.OWN,
         doc="w_i, the weight of the sender's turns in the team's level: the spread D_i of its"
         " neighbourhood's contacts (m², robust)",

@@ -533,7 +533,7 @@ class RobustPipeline(EstimationPipeline):
         consensus = self.consensus
         consensus.set("rotation", wrapped(self.angle))
         consensus.set("mean_turn_variance", self.rotation.variance)
-        consensus.set("rotation_weight", min(self._rotation_weight, MAX_DISTANCE * MAX_DISTANCE))
+        consensus.set("rotation_weight", min(self._rotation_weight, MAX_DISTANCE**2))  # its bound
         return consensus.state
 
     def _reported(self, relative: dict[int, Vec2], contact_to_com: Vec2 | None) -> dict:

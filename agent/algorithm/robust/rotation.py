@@ -48,7 +48,9 @@ The team's turn is as uncertain as the mean of the robots' own turns: ``Var = Σ
 if they were independent, twice that as they are not (each edge's turn is in both its ends'),
 so ``2 ν / n`` with ``ν`` the robots' mean ``Var(δ_i)``, averaged by the same consensus with the
 own variance as input: the direction filters' process noise
-(:attr:`RotationConsensus.turn_variance`). The weighted mean is no more uncertain than that.
+(:attr:`RotationConsensus.turn_variance`). The weighted mean of independent turns,
+``1 / Σ_i λ_i``, is never more uncertain than their plain mean (``1 / mean(λ) ≤ mean(1 / λ)``):
+the process noise errs on the safe side.
 
 Levels are sent modulo ``2π`` (the team quantity ``rotation``) and compared by the wrapped
 difference: the robots' disagreement is a small angle. Without the flow form of
