@@ -40,7 +40,8 @@ from __future__ import annotations
 
 import math
 
-from agent.algorithm.robust.least_squares import RunFit
+from agent.algorithm.estimation.estimator import Covariance
+from agent.algorithm.robust.least_squares import RunFit, Solution
 from agent.platform.geometry import Vec2, arc_factor, largest_std, rotate
 
 
@@ -75,6 +76,9 @@ class ComFit(RunFit):
         self._torque_once = 0.0
         self._torque_twice = 0.0
         """``∫∫ τ/J`` since the first sample: the turn of the known torque, taken out of α."""
+        self._covariance: tuple[Solution | None, Covariance | None] = (None, None)
+        """The solution :attr:`covariance` was last made of, and it (read several times a
+        solve: made once)."""
 
     def regressor(self, alpha: float) -> Vec2:
         """``φ = (n/J) R(−α) Qᵀ f``."""
@@ -154,13 +158,17 @@ class ComFit(RunFit):
         return None if fit is None else (fit.estimate[2], fit.estimate[3])
 
     @property
-    def covariance(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    def covariance(self) -> Covariance | None:
         """The covariance (m²) of :attr:`estimate`."""
         fit = self._solution
         if fit is None:
             return None
-        (xx, xy), (yx, yy) = fit.covariance(self._scale, of=(2, 3))
-        return ((xx, xy), (yx, yy))
+        made_of, covariance = self._covariance
+        if made_of is not fit:
+            (xx, xy), (yx, yy) = fit.covariance(self._scale, of=(2, 3))
+            covariance = ((xx, xy), (yx, yy))
+            self._covariance = (fit, covariance)
+        return covariance
 
     @property
     def std(self) -> float | None:

@@ -16,6 +16,7 @@ normal_equations`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -25,6 +26,13 @@ from agent.algorithm.robust.normal_equations import (
     quadratic_form,
     solver,
 )
+
+
+@functools.cache
+def _lower_triangle_index(p: int) -> tuple[int, ...]:
+    """For each entry ``(i, j)`` of a ``p × p`` symmetric matrix (row-major), where it is kept
+    in the lower triangle: ``max(i, j) p + min(i, j)``."""
+    return tuple(max(i, j) * p + min(i, j) for i in range(p) for j in range(p))
 
 
 class LeastSquares:
@@ -46,6 +54,8 @@ class LeastSquares:
         self._add = accumulator(params)
         self._solve = solver(params)
         self._form = quadratic_form(params)
+        self._mirror = _lower_triangle_index(params)
+        """Where each entry of the full ``M`` (row-major) is kept in :attr:`_m`."""
 
     def add(self, row: Sequence[float], target: float) -> None:
         """One more row ``rowᵀ p ≈ target`` (``row``: ``p`` numbers)."""
@@ -92,7 +102,7 @@ class LeastSquares:
         p = self.params
         if self.rows <= p:
             return None
-        full = [self._m[max(i, j) * p + min(i, j)] for i in range(p) for j in range(p)]
+        full = [self._m[k] for k in self._mirror]
         i, j = sorted(at)
         a, b, _, d = information
         trace = sum(full[k * (p + 1)] for k in range(p))
