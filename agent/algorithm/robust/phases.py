@@ -329,11 +329,14 @@ class RobustPhases(PhaseMachine):
             w = self.n * own.mean_square_offset
             friction = self.n * abs(own.mean_spin_torque)
             self.held = True
+            # The level is the largest any robot asked for when it became ready: this
+            # robot's own estimate now may be less than the one that decided.
             self.held_because = (
-                f"the floor's friction torque met in Step 1, {friction:.3g} N m, asks more of"
-                f" Step 4 than max_force = {t.max_force:g} N a robot gives"
-                f" ({t.max_force * math.sqrt(w):.3g} N m, less than {LEAST_FRICTION_MARGIN:g}"
-                " times it): the floor holds it"
+                f"the floor's friction torque met in Step 1, {friction:.3g} N m by this robot's"
+                " estimate now (the team sizes Step 4 on the largest any robot measured when it"
+                f" was ready), asks more of Step 4 than max_force = {t.max_force:g} N a robot"
+                f" gives ({t.max_force * math.sqrt(w):.3g} N m, less than"
+                f" {LEAST_FRICTION_MARGIN:g} times the largest): the floor holds it"
             )
             return t.max_force
         return min(t.inertia_force * _level(inertia), t.max_force)
