@@ -76,9 +76,6 @@ class ComFit(RunFit):
         self._torque_once = 0.0
         self._torque_twice = 0.0
         """``∫∫ τ/J`` since the first sample: the turn of the known torque, taken out of α."""
-        self._covariance: tuple[Solution | None, Covariance | None] = (None, None)
-        """The solution :attr:`covariance` was last made of, and it (read several times a
-        solve: made once)."""
 
     def regressor(self, alpha: float) -> Vec2:
         """``φ = (n/J) R(−α) Qᵀ f``."""
@@ -163,12 +160,11 @@ class ComFit(RunFit):
         fit = self._solution
         if fit is None:
             return None
-        made_of, covariance = self._covariance
-        if made_of is not fit:
-            (xx, xy), (yx, yy) = fit.covariance(self._scale, of=(2, 3))
-            covariance = ((xx, xy), (yx, yy))
-            self._covariance = (fit, covariance)
-        return covariance
+        return self._of_solution("covariance", self._covariance_of)
+
+    def _covariance_of(self, fit: Solution) -> Covariance:
+        (xx, xy), (yx, yy) = fit.covariance(self._scale, of=(2, 3))
+        return ((xx, xy), (yx, yy))
 
     @property
     def std(self) -> float | None:

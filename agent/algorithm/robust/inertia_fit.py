@@ -53,9 +53,6 @@ class InertiaFit(ReciprocalFit):
         self.spin_twice = 0.0
         """``Σ_ω = ∫∫ sgn ω`` since the first sample."""
         self._spin_once = 0.0
-        self._friction: tuple[Solution | None, tuple[float, float] | None] = (None, None)
-        """The solution :attr:`friction_torque` was last made of, and it (read at every
-        report, long after the fit's last solve: made once)."""
 
     def update(self, angle: float, torque: float, dt: float, *, spin: float = 1.0) -> None:
         """Feed the rotation ``angle`` (rad) at the end of an interval ``dt`` during which the
@@ -93,13 +90,12 @@ class InertiaFit(ReciprocalFit):
         fit = self._solution
         if fit is None:
             return None
-        made_of, found = self._friction
-        if made_of is not fit:
-            p3, p5 = fit.estimate[2], fit.estimate[4]
-            gradient = (0.0, 0.0, p5 / (p3 * p3), 0.0, -1.0 / p3)
-            found = (-p5 / p3, math.sqrt(fit.variance_of(gradient, self._scale)))
-            self._friction = (fit, found)
-        return found
+        return self._of_solution("friction_torque", self._friction_of)
+
+    def _friction_of(self, fit: Solution) -> tuple[float, float]:
+        p3, p5 = fit.estimate[2], fit.estimate[4]
+        gradient = (0.0, 0.0, p5 / (p3 * p3), 0.0, -1.0 / p3)
+        return -p5 / p3, math.sqrt(fit.variance_of(gradient, self._scale))
 
     @property
     def lag(self) -> float:

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 from agent.algorithm.robust.normal_equations import (
     QuadraticForm,
@@ -26,6 +27,8 @@ from agent.algorithm.robust.normal_equations import (
     quadratic_form,
     solver,
 )
+
+T = TypeVar("T")
 
 
 @functools.cache
@@ -155,7 +158,8 @@ class RunFit:
     """A fit over a run of :attr:`t` seconds whose rows' errors stay correlated for
     :attr:`correlation_time` (0: each row counts on its own): its covariance is the
     least-squares one scaled by ``correlation_time × rows / t``. Subclasses add rows to
-    :attr:`fit`, advance :attr:`t` and call :meth:`_solve`."""
+    :attr:`fit`, advance :attr:`t` and call :meth:`_solve` with every row, so that a solution
+    fixes everything its reports depend on (:meth:`_of_solution`)."""
 
     min_rows = 10
     correlation_time = CORRELATION_TIME
@@ -166,9 +170,25 @@ class RunFit:
         self.t = 0.0
         """s since the first sample."""
         self._solution: Solution | None = None
+        self._made: tuple[Solution | None, dict[str, Any]] = (None, {})
+        """The solution :meth:`_of_solution` last made values of, and them by name."""
 
     def _solve(self) -> None:
         self._solution = self.fit.solve() if self.fit.rows >= self.min_rows else None
+
+    def _of_solution(self, name: str, make: Callable[[Solution], T]) -> T:
+        """``make(solution)`` for the current (not None) solution, made once per solution: the
+        reports read it many times a solve, and after the fit's last solve at every report.
+        Exact, since every row comes with a solve: :attr:`t` and the rows, all that the
+        scale and the solution depend on, stay as they were until the next solution."""
+        fit = self._solution
+        made_of, made = self._made
+        if made_of is not fit:
+            made = {}
+            self._made = (fit, made)
+        if name not in made:
+            made[name] = make(fit)
+        return made[name]
 
     @property
     def _scale(self) -> float:
