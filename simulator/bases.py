@@ -13,7 +13,7 @@ and speed limits:
 
 (``clamp`` shortens a vector to the given length). Per physics step ``Δt`` the lag is taken
 exactly, ``Δv = (v_cmd − v)(1 − e^{−Δt/τ})``, then shortened to ``a_max Δt`` and the speed to
-``v_max``; the position follows with the new velocity (semi-implicit Euler, as the load's).
+``v_max``; the position follows with the new velocity (semi-implicit Euler).
 
 The contact is a spring and damper between the base and the load's contact point ``C_i``:
 

@@ -64,6 +64,7 @@ from agent.platform.geometry import Vec2
 from agent.platform.protocol import GRAVITY
 
 if TYPE_CHECKING:
+    from simulator.integrator import PoseCorrection
     from simulator.scenario import Ground, SupportLoads
 
 STICK_SPEED = 1e-4
@@ -240,8 +241,18 @@ class GroundContact:
     friction; :meth:`start_tick` and :meth:`end_tick` bracket a sensor period to measure what
     the floor did over it (see the module docstring)."""
 
-    def __init__(self, space: pymunk.Space, body: pymunk.Body, ground: Ground, dt: float) -> None:
+    def __init__(
+        self,
+        space: pymunk.Space,
+        body: pymunk.Body,
+        ground: Ground,
+        dt: float,
+        pose: PoseCorrection | None = None,
+    ) -> None:
         self._space, self._body, self._dt = space, body, dt
+        self._pose = pose
+        """Where the force and torque of each step the load moves freely are summed for the
+        pose's second-order term (:mod:`simulator.integrator`); None: not summed."""
         self.ground = ground
         self.loads: SupportLoads
         """The normal loads and friction figures now (:meth:`set_loads`)."""
@@ -364,17 +375,21 @@ class GroundContact:
         if regime == SLIDING and self._coulomb:
             v, w, c, s = body.velocity, body.angular_velocity, cos, sin
             fx, fy, tau = self._kinetic.coulomb(c * v.x + s * v.y, c * v.y - s * v.x, w)
-            body.force = Vec2d(
+            felt = Vec2d(
                 force.x + c * fx - s * fy - self._damp_v * v.x,
                 force.y + s * fx + c * fy - self._damp_v * v.y,
             )
-            body.torque = torque + tau - self._damp_w * w
+            felt_torque = torque + tau - self._damp_w * w
         elif self._damp_v:
-            body.force = force - body.velocity * self._damp_v
-            body.torque = torque - body.angular_velocity * self._damp_w
+            felt = force - body.velocity * self._damp_v
+            felt_torque = torque - body.angular_velocity * self._damp_w
         else:
-            body.force = force
-            body.torque = torque
+            felt, felt_torque = force, torque
+        body.force = felt
+        body.torque = felt_torque
+        if regime != SLOW and self._pose is not None:
+            # (slow: the joints' impulses act too; a stop's last mm/s, left to Chipmunk alone)
+            self._pose.add(felt.x, felt.y, felt_torque)
         self._space.step(self._dt)
 
     def end_tick(self, period: float) -> None:

@@ -47,8 +47,12 @@ it every physics substep is :meth:`simulator.friction.GroundContact.step`, which
 floor's friction at the load's supports, and the truth carries the friction applied
 (:mod:`simulator.friction`).
 
-Implementation notes (pymunk 7): the body carries the scenario's mass and moment and has no
-shapes (a shape with a density would override them); space gravity is zero and damping is off;
+Implementation notes (pymunk 7): Chipmunk's step leaves out the second-order term of the
+motion, ``(h²/2) f / m``: its velocities would be half a step ahead of its poses. The plant adds
+that term to the pose at each tick's end (:mod:`simulator.integrator`), so the velocities the
+robots measure and the poses of the truth are one motion's at one instant. The body carries
+the scenario's mass and moment and has no shapes (a shape with a density would override them);
+space gravity is zero and damping is off;
 ``body.force``/``body.torque`` are cleared by every step, so the held forces are re-applied at
 the contacts' *current* world points before every physics substep. The per-substep path uses
 plain floats and pymunk calls only (no numpy but the floor's one product over its supports) to
@@ -69,6 +73,7 @@ from agent.platform.geometry import Vec2
 from agent.platform.protocol import Measurement, Truth
 from simulator.bases import Bases, sensor_biases
 from simulator.friction import GroundContact
+from simulator.integrator import PoseCorrection
 
 if TYPE_CHECKING:
     from simulator.scenario import Scenario
@@ -104,8 +109,13 @@ class Plant:
         body.position = (float(spec.position[0]), float(spec.position[1]))
         self._space.add(body)  # no shapes: they would override mass and moment
         self._body, space = body, self._space
+        self._pose = PoseCorrection(body, self._dt)
+        """The second-order term of every physics step, added at each tick's end
+        (:mod:`simulator.integrator`)."""
         ground = scenario.ground
-        self._ground = None if ground is None else GroundContact(space, body, ground, self._dt)
+        self._ground = (
+            None if ground is None else GroundContact(space, body, ground, self._dt, self._pose)
+        )
         """The floor's friction (:mod:`simulator.friction`); None: frictionless."""
         self._substep = self._free_step if self._ground is None else self._ground.step
         """One physics step with the robots' force and torque: ``(force, torque, cos θ, sin θ)``."""
@@ -273,6 +283,7 @@ class Plant:
             self._advance_ideal()
         else:
             self._advance_through_drives()
+        self._pose.apply()
         if ground is not None:
             ground.end_tick(self._period)
         self.tick += 1
@@ -328,6 +339,7 @@ class Plant:
         body = self._body
         body.force = force
         body.torque = torque
+        self._pose.add(force.x, force.y, torque)
         self._space.step(self._dt)
 
     def _advance_through_drives(self) -> None:
@@ -386,6 +398,7 @@ class Plant:
             body.mass = float(mass)
         if moment is not None:
             body.moment = float(moment)
+        self._pose.reload()
         if self._ground is not None:
             self._ground.set_loads()  # the weight and its centre moved: the normal loads too
 

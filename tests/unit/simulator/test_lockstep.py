@@ -49,7 +49,7 @@ def test_a_halted_team_or_one_out_of_time_is_over_and_not_converged() -> None:
 
 
 def test_the_inprocess_run_is_judged_at_the_final_instant_of_its_estimates() -> None:
-    """Held past the team's end (8.47 s) to 10 s: the run ends at the scenario's end, the
+    """Held past the team's end (6.99 s) to 10 s: the run ends at the scenario's end, the
     instant the launcher takes as final from the same estimates."""
     paper = load_scenario(PAPER)
     held = dataclasses.replace(paper, run=dataclasses.replace(paper.run, hold_s=10.0))
