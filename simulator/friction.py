@@ -247,12 +247,12 @@ class GroundContact:
         body: pymunk.Body,
         ground: Ground,
         dt: float,
-        pose: PoseCorrection | None = None,
+        pose: PoseCorrection,
     ) -> None:
         self._space, self._body, self._dt = space, body, dt
         self._pose = pose
         """Where the force and torque of each step the load moves freely are summed for the
-        pose's second-order term (:mod:`simulator.integrator`); None: not summed."""
+        pose's second-order term (:mod:`simulator.integrator`)."""
         self.ground = ground
         self.loads: SupportLoads
         """The normal loads and friction figures now (:meth:`set_loads`)."""
@@ -387,7 +387,7 @@ class GroundContact:
             felt, felt_torque = force, torque
         body.force = felt
         body.torque = felt_torque
-        if regime != SLOW and self._pose is not None:
+        if regime != SLOW:
             # (slow: the joints' impulses act too; a stop's last mm/s, left to Chipmunk alone)
             self._pose.add(felt.x, felt.y, felt_torque)
         self._space.step(self._dt)

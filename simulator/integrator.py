@@ -19,7 +19,7 @@ steps (:meth:`~PoseCorrection.add`, floats only) and adds it to the pose at the 
 (:meth:`~PoseCorrection.apply`): what the robots measure and the truth then refer to one
 motion at one instant, and what the forces impart over a tick is unchanged. The angle is
 added about the COM, the translation to it. Within the period the pose lags by at most the
-period's sum (``T² f / 2m`` for a force held over the period ``T``, 0.5 mm for 1 m/s² at
+period's sum (``T² f / 2m`` for a force held over the period ``T``, 0.05 mm for 1 m/s² at
 100 Hz), which the robots' torques read through their arms: an error of second order in the
 step, as is holding a torque that turns with the load at its value at the start of a step.
 """
