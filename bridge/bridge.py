@@ -38,8 +38,8 @@ the admittance loop between them (:class:`~bridge.admittance.Admittance`). Tick 
    for a tick whose sample is not in, is refused and counted;
 3. two stops, each the loop's state forgotten and ``MotionCommand`` in mode STOP, paced as the
    ZERO frames above: the agent silent for ``watchdog_s`` (the watchdog), and the sensor stale
-   (no usable ``ForceTorque`` for ``watchdog_s`` since the last, once one has come, counted
-   from the bus opening a tick without one), each logged once per trip with its reason and
+   (no usable ``ForceTorque`` read for ``watchdog_s`` since the last, once one has come, while
+   the bus has opened a tick without one), each logged once per trip with its reason and
    counted. The base drives again once both are back. A contact force beyond the loop's
    ``max_contact_force`` is a third: the loop commands standstill (a ``MotionCommand`` of zero
    velocity for that tick, so that a lockstep bus master still gets its tick's command),
@@ -167,14 +167,17 @@ class Bridge:
         """The tick the loop last stepped for, and the frame it gave."""
         self._sensor_tick: int | None = None
         """The tick of the newest usable ``ForceTorque``."""
+        self._sensor_heard_at = -math.inf
+        """When it was read."""
         self._sensor_owed_since: float | None = None
         """When the bus was first seen with a tick newer than the sensor's last sample."""
         self._sensor_status = 0
         """The status bits of the newest unusable ``ForceTorque`` since the last usable one."""
 
     # ------------------------------------------------------------------ the bus → the agent
-    def receive(self, message: can.Message) -> list[Measurement]:
-        """A frame from the bus; the measurements it completes (zero or one)."""
+    def receive(self, message: can.Message, at: float) -> list[Measurement]:
+        """A frame from the bus, read at ``at`` (the clock of :meth:`watchdog`); the
+        measurements it completes (zero or one)."""
         self.counts["frames in"] += 1
         try:
             frame = self.codec.decode(message)
@@ -200,7 +203,7 @@ class Bridge:
         if isinstance(frame, Heartbeat):
             self.driver_mode, self.driver_faults = frame.mode, frame.faults
             return []
-        return self._sampled(frame)
+        return self._sampled(frame, at)
 
     def _sync(self, frame: Sync) -> None:
         last = self._last_sync
@@ -226,14 +229,14 @@ class Bridge:
             self.counts["lost frames"] += (frame.counter - last - 1) % COUNTER_MODULO
 
     def _sampled(
-        self, frame: Odometry | AppliedForce | MotionFeedback | ForceTorque
+        self, frame: Odometry | AppliedForce | MotionFeedback | ForceTorque, at: float
     ) -> list[Measurement]:
         tick = self.ticks.tick_of(frame.counter, self.wall())
         if tick is None:
             what = f"{type(frame).__name__} counter {frame.counter}"
             self.rejects("can frame", f"{what}: no open tick has it", "stale")
             return []
-        if isinstance(frame, ForceTorque) and not self._sensed(frame, tick):
+        if isinstance(frame, ForceTorque) and not self._sensed(frame, tick, at):
             return []
         sample = self._sample
         if sample is None or sample.tick != tick:
@@ -254,16 +257,16 @@ class Bridge:
         force = self._tared(tick, sample.force) if self.velocity_profile else sample.force
         return [Measurement(self.robot, tick, tick * self.period_s, sample.velocity, force)]
 
-    def _sensed(self, frame: ForceTorque, tick: int) -> bool:
-        """Whether the sensor's sample is usable (no status bit set); the sensor is heard
-        only then."""
+    def _sensed(self, frame: ForceTorque, tick: int, at: float) -> bool:
+        """Whether the sensor's sample, read at ``at``, is usable (no status bit set); the
+        sensor is heard only then."""
         if frame.status:
             self.counts["sensor faults"] += 1
             self._sensor_status = frame.status
             return False
         self._sensor_status = 0
         if self._sensor_tick is None or tick >= self._sensor_tick:
-            self._sensor_tick = tick
+            self._sensor_tick, self._sensor_heard_at = tick, at
             self._sensor_owed_since = None
         if self.sensor_stale:
             self.sensor_stale = False
@@ -406,15 +409,14 @@ class Bridge:
         return [self.halt(latest)]
 
     def _sensor_trips(self, at: float, latest: int | None) -> bool:
-        """Whether the force/torque sensor goes stale now: no usable sample for
-        ``watchdog_s`` since its last one (once one has come). The bus opening a tick without
-        one starts the count, a period after the last sample: the stop comes ``watchdog_s``
-        after the last sample, not a period later."""
+        """Whether the force/torque sensor goes stale now: no usable sample read for
+        ``watchdog_s`` since its last one (once one has come), while the bus has opened a
+        tick without one (:attr:`_sensor_deadline`)."""
         if self._sensor_tick is None or latest is None or latest <= self._sensor_tick:
             return False
         if self._sensor_owed_since is None:
             self._sensor_owed_since = at
-        if self.sensor_stale or at - self._sensor_owed_since <= self._sensor_grace_s:
+        if self.sensor_stale or at <= self._sensor_deadline:
             return False
         self.sensor_stale = True
         self.counts["sensor stale trips"] += 1
@@ -426,16 +428,25 @@ class Bridge:
             self.robot,
             self._sensor_tick,
             why,
-            (at - self._sensor_owed_since + self.period_s) * 1e3,
+            (at - self._sensor_heard_at) * 1e3,
             self.watchdog_s * 1e3,
         )
         return True
 
     @property
-    def _sensor_grace_s(self) -> float:
-        """How long after the bus opened a tick without a usable sample the sensor is stale:
-        ``watchdog_s`` from its last sample, a period before."""
-        return max(self.watchdog_s - self.period_s, 0.0)
+    def _sensor_deadline(self) -> float:
+        """When the sensor owed a sample is stale: ``watchdog_s`` after its last usable sample
+        was read, and at least half of ``watchdog_s`` after the bus opened the first tick
+        without one. On a bus that ticks in real time the second comes a period after the
+        sample, so the stop comes a watchdog after the last sample, however late the ticks
+        between. The second holds when the bus stood still longer than that (a lockstep bus
+        master waiting for a slow plant): its next tick's sample, a frame behind the tick,
+        gets time to come."""
+        assert self._sensor_owed_since is not None
+        return max(
+            self._sensor_heard_at + self.watchdog_s,
+            self._sensor_owed_since + self.watchdog_s / 2,
+        )
 
     def halt(self, tick: int) -> can.Message:
         """The frame that stops the AGV, for ``tick``: ``ForceCommand`` in mode ZERO, or with
@@ -451,7 +462,7 @@ class Bridge:
         """When :meth:`watchdog` has something to do next (a time like ``at``)."""
         due = []
         if self._sensor_owed_since is not None and not self.sensor_stale:
-            due.append(max(at, self._sensor_owed_since + self._sensor_grace_s + 1e-4))
+            due.append(max(at, self._sensor_deadline + 1e-4))
         if self.tripped or self.sensor_stale:  # a new tick is a frame, and the loop checks
             due.append(max(at, self._last_zero_at + self.watchdog_s))  # after every frame
         elif self._last_command_at is None:

@@ -88,6 +88,8 @@ def open_bus(settings: CanSettings) -> can.BusABC:
 
 class _Received(NamedTuple):
     message: can.Message
+    at: float
+    """When the reader read it (``time.monotonic``, the clock of the bridge's watchdog)."""
 
 
 class _BusFailed(NamedTuple):
@@ -163,7 +165,7 @@ class BridgeNode:
                     put((time.perf_counter(), _BusFailed(err)))
                 return
             if message is not None:
-                put((time.perf_counter(), _Received(message)))
+                put((time.perf_counter(), _Received(message, time.monotonic())))
 
     def _close_bus(self) -> None:
         self._reader_stop.set()
@@ -225,7 +227,7 @@ class BridgeNode:
     def _handle(self, item) -> None:
         bridge = self.bridge
         if isinstance(item, _Received):
-            for measurement in bridge.receive(item.message):
+            for measurement in bridge.receive(item.message, item.at):
                 self.port.send(measurement)
         elif isinstance(item, _BusFailed):
             if self.bus is not None:

@@ -257,6 +257,19 @@ class DriverRig:
     def latest(self) -> BridgeStatus:
         return self.rig.latest()[1]
 
+    def frames_when(self, enough, what: str, timeout: float = 10.0) -> list:
+        """A copy of :attr:`frames` once ``enough`` holds of it: the reader may trail what
+        the bridge's status already says on a loaded host, so the tests wait for the frames
+        they judge, not for a fixed time."""
+        deadline = time.monotonic() + timeout
+        while True:
+            frames = list(self.frames)
+            if enough(frames):
+                return frames
+            self.rig.check()
+            assert time.monotonic() < deadline, f"not {what} within {timeout:g} s"
+            time.sleep(0.05)
+
     def wait(self, condition, timeout: float, what: str) -> BridgeStatus:
         return self.rig.wait_status(condition, timeout, what)
 

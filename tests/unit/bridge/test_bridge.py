@@ -64,10 +64,12 @@ def make_bridge(ticks=None, wall=None, watchdog_s: float = 0.1) -> Bridge:
     )
 
 
-def feed(bridge: Bridge, *frames) -> list[Measurement]:
+def feed(bridge: Bridge, *frames, at: float = 0.0) -> list[Measurement]:
+    """The ``frames`` (frames or messages), read at ``at``; the measurements they make."""
     out: list[Measurement] = []
     for frame in frames:
-        out += bridge.receive(frame if isinstance(frame, can.Message) else CODEC.encode(frame))
+        message = frame if isinstance(frame, can.Message) else CODEC.encode(frame)
+        out += bridge.receive(message, at)
     return out
 
 

@@ -58,10 +58,12 @@ def make_bridge(settings: AdmittanceSettings = SETTINGS, watchdog_s: float = 0.1
     )
 
 
-def feed(bridge: Bridge, *frames) -> list[Measurement]:
+def feed(bridge: Bridge, *frames, at: float = 0.0) -> list[Measurement]:
+    """The ``frames`` (frames or messages), read at ``at``; the measurements they make."""
     out: list[Measurement] = []
     for frame in frames:
-        out += bridge.receive(frame if isinstance(frame, can.Message) else CODEC.encode(frame))
+        message = frame if isinstance(frame, can.Message) else CODEC.encode(frame)
+        out += bridge.receive(message, at)
     return out
 
 
@@ -250,7 +252,8 @@ def test_commands_and_velocities_are_clamped_to_the_dbc_and_counted() -> None:
 
 # ------------------------------------------------------------------------- the two stops
 def drive(bridge: Bridge, tick: int, at: float, push=(10.0, 0.0)) -> MotionCommand:
-    feed(bridge, *tick_frames(tick, f=(2.0, 0.0)))
+    """Tick ``tick``'s frames read at ``at``, and the agent's ``push`` for it; the frame sent."""
+    feed(bridge, *tick_frames(tick, f=(2.0, 0.0)), at=at)
     (frame,) = sent(bridge.command(Command(2, tick, push), at=at))
     return frame
 
@@ -333,16 +336,41 @@ def test_the_sensor_is_not_stale_before_its_first_sample_nor_while_the_bus_stand
     assert not stands.sensor_stale and stands.next_check(100.0) == 100.0 + PERIOD
 
 
-def test_next_check_is_the_stale_sensors_deadline() -> None:
+def test_next_check_is_the_stale_sensors_deadline_a_watchdog_after_the_last_sample() -> None:
+    """However late the tick without a sample opens (a driver that hiccups), the stop comes
+    a watchdog after the last sample was read."""
+    for opened in (5.0, 5.03):
+        bridge = make_bridge(watchdog_s=0.1)
+        tared(bridge)
+        drive(bridge, 4, at=4.99)
+        feed(bridge, Sync(5), at=opened)
+        bridge.command(Command(2, 4, (10.0, 0.0)), at=opened)  # the agent is not silent
+        assert bridge.watchdog(opened) == []
+        due = bridge.next_check(opened)
+        assert 5.09 < due < 5.091
+        assert bridge.watchdog(due - 2e-4) == [] and not bridge.sensor_stale
+        assert len(bridge.watchdog(due)) == 1 and bridge.sensor_stale and not bridge.tripped
+
+
+def test_a_bus_that_stood_still_gives_its_next_ticks_sample_half_a_watchdog() -> None:
+    """A lockstep bus master waited a second for its plant: the tick it opens then is owed
+    its sample, which comes a frame later; the sensor is not stale for that."""
     bridge = make_bridge(watchdog_s=0.1)
     tared(bridge)
-    drive(bridge, 4, at=5.05)
-    feed(bridge, Sync(5))
-    assert bridge.watchdog(5.0) == []
-    due = bridge.next_check(5.0)
-    assert 5.09 < due < 5.091  # a watchdog after the last sample, a period before tick 5
-    assert due < 5.15  # before the agent's
-    assert len(bridge.watchdog(due)) == 1 and bridge.sensor_stale and not bridge.tripped
+    drive(bridge, 4, at=4.99)
+    feed(bridge, Sync(5), at=6.0)
+    bridge.command(Command(2, 4, (10.0, 0.0)), at=6.0)  # the agent's watchdog holds off
+    assert bridge.watchdog(6.0) == []
+    due = bridge.next_check(6.0)
+    assert 6.05 < due < 6.051
+    assert bridge.watchdog(6.04) == []
+    drive(bridge, 5, at=6.045)  # its sample, late as it may be on a loaded host
+    assert bridge.watchdog(6.06) == [] and not bridge.sensor_stale
+    feed(bridge, Sync(6), at=9.0)  # stood still again, and this time no sample comes
+    bridge.command(Command(2, 5, (10.0, 0.0)), at=9.0)
+    assert bridge.watchdog(9.0) == []
+    assert bridge.watchdog(9.049) == [] and not bridge.sensor_stale
+    assert len(bridge.watchdog(9.0501)) == 1 and bridge.sensor_stale
 
 
 def test_the_velocity_status_crosses_the_wire() -> None:
