@@ -49,9 +49,6 @@ class Averaging(enum.Enum):
     ``ξ_i ← ξ_i + Σ_j a_ij (ξ_j − ξ_i) + (r_i⁺ − r_i)`` → the mean of the inputs ``r_i``;
     flow form (:mod:`agent.algorithm.estimation.team_consensus`), so lost messages do not
     bias it."""
-    PLAIN_MEAN = "plain mean"
-    """The same consensus without flows: a lost message shifts the mean slightly (for a
-    variance, which need not be exact)."""
     LEVEL = "level"
     """Consensus on a level that every robot also integrates on its own (the load's rotation,
     :mod:`agent.algorithm.robust.rotation`): sent modulo ``2π``."""
@@ -213,8 +210,8 @@ TEAM_QUANTITIES: tuple[TeamQuantity, ...] = (
         "mean_turn_variance",
         1,
         MAX_TURN_VARIANCE,
-        Averaging.PLAIN_MEAN,
-        doc="ν_i → the robots' mean turn variance (rad², robust)",
+        Averaging.MEAN,
+        doc="ν_i → the robots' mean turn variance (rad², robust), input Var(δ_i)",
     ),
 )
 """The team's quantities, in wire order."""

@@ -15,7 +15,20 @@ form, which keeps that sum when messages are lost.
 
 from __future__ import annotations
 
+import functools
+import math
+
 
 def metropolis_weight(degree_i: int, degree_j: int) -> float:
     """``a_ij = 1 / (1 + max(d_i, d_j))``."""
     return 1.0 / (1.0 + max(degree_i, degree_j))
+
+
+@functools.cache
+def delay_factor(delay: int) -> float:
+    """``ρ_d = sin(π / (2 (2d + 1)))``, the factor on ``a_ij`` for a neighbour's state ``d ≥ 0``
+    instants older than the previous instant (the load's rotation,
+    :mod:`agent.algorithm.robust.rotation`). ``x ← x − c x(k−d)`` is stable for ``c < 2 ρ_d``,
+    and a Metropolis graph's ``c`` (an eigenvalue of ``I − A``) is below 2: so the consensus
+    stays stable however late the states (``ρ_0 = 1``: on time, the plain weights)."""
+    return math.sin(math.pi / (2.0 * (2.0 * max(delay, 0) + 1.0)))

@@ -147,7 +147,7 @@ class TeamConsensus:
         return v[start] if self._shape[name] == 1 else (v[start], v[start + 1])
 
     def set(self, name: str, value) -> None:
-        """The state of a quantity that another consensus runs (``LEVEL``, ``PLAIN_MEAN``)."""
+        """The state of a quantity that another consensus runs (``LEVEL``, ``OWN``)."""
         i = self._index[name]
         if i not in self._other:
             raise KeyError(f"{name} runs in this consensus")

@@ -43,9 +43,10 @@ class PaperPipeline(EstimationPipeline):
 
     def _inputs(self, x: Vec2) -> Sequence[float]:
         """``‖x_i‖²`` (→ ``w / n``); ideal drives (gain 1), no mass information, no spin
-        torque, no kick size and no ``ẑ_C`` for the team's mean (the robust family's)."""
+        torque, no kick size, no ``ẑ_C`` and no turn variance for the team's means (the robust
+        family's)."""
         norm2 = x[0] * x[0] + x[1] * x[1]
-        return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return (norm2, 1.0, x[0], x[1], norm2, *(0.0,) * 10)
 
     def enter(self, phase: Phase, k: int, schedule: Schedule) -> None:
         super().enter(phase, k, schedule)

@@ -33,6 +33,8 @@ from agent.algorithm.robust.rotation import (
     RotationConsensus,
     neighbourhood_turn,
     own_turn,
+    own_variance,
+    turn_variance,
     turn_weight,
     wrapped,
 )
@@ -96,6 +98,8 @@ class RobustPipeline(EstimationPipeline):
         """This robot's kick size in Step 1, the input of the team's mean."""
         self._com_input: Vec2 | None = None
         """This robot's own ``ẑ_C`` (:meth:`_own_com`), the input of the team's."""
+        self._variance_input = 0.0
+        """This robot's own turn's variance (rad²), the input of the team's mean ``ν``."""
         super().__init__(config, neighbours)
         self.rotation = RotationConsensus(len(neighbours), config.n)
         """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
@@ -244,6 +248,7 @@ class RobustPipeline(EstimationPipeline):
             self._torque_input,
             self._kick_input,
             self._com_input,
+            self._variance_input,
         )
 
     def _before_consensus(self, schedule: Schedule) -> None:
@@ -271,18 +276,19 @@ class RobustPipeline(EstimationPipeline):
                 s.degree,
                 s.instant,
                 s.consensus.rotation,
-                s.consensus.mean_turn_variance,
                 s.consensus.rotation_weight,
             )
             for j, s in inbox.latest.items()
             if j in edges
         )
         turn, variance = (fallback, None) if own is None else own
-        rotation = self.rotation
-        turn = rotation.update(
-            self.instant, turn, variance, heard, self._angle_at.get, self._rotation_weight
+        if variance is not None:
+            self._variance_input = own_variance(variance)
+        turn = self.rotation.update(
+            self.instant, turn, heard, self._angle_at.get, self._rotation_weight
         )
-        variance = rotation.turn_variance
+        # the team's, from the last instant's consensus (this one's runs after the turn)
+        variance = turn_variance(self.consensus["mean_turn_variance"], self.n)
         for j in zdots:
             edge = edges[j]
             if edge in fresh:
@@ -529,10 +535,9 @@ class RobustPipeline(EstimationPipeline):
 
     def consensus_state(self):
         """The consensus' states, with this robot's level of the load's rotation (sent modulo
-        ``2π``) and its state of the turns' mean variance."""
+        ``2π``) and the weight of its turns."""
         consensus = self.consensus
         consensus.set("rotation", wrapped(self.angle))
-        consensus.set("mean_turn_variance", self.rotation.variance)
         consensus.set("rotation_weight", min(self._rotation_weight, MAX_DISTANCE**2))  # its bound
         return consensus.state
 

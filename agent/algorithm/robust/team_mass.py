@@ -61,18 +61,31 @@ def inputs(
     torque: float,
     kick: float,
     com: Vec2 | None,
+    turn_variance: float,
 ) -> tuple[float, ...]:
     """A robot's inputs of the team's means, in declaration order
     (:data:`agent.platform.team.TEAM_QUANTITIES`): ``‖x_i‖²`` (→ ``w / n``), ``g_i``,
     ``g_i x_i``, ``g_i ‖x_i‖²``, ``ι_i``, ``ι_i m_i``, ``ι_i ln m_i``, ``ι_i (ln m_i)²``,
-    ``τ_i``, ``A_i``, ``ζ_i`` and ``ζ_i ẑ_C``, for its offsets iterate ``x``, its drive's
-    gain, its mass input (:func:`mass_input`), its torque in Step 1's spin-up
+    ``τ_i``, ``A_i``, ``ζ_i``, ``ζ_i ẑ_C`` and ``Var(δ_i)``, for its offsets iterate ``x``,
+    its drive's gain, its mass input (:func:`mass_input`), its torque in Step 1's spin-up
     (:attr:`~agent.algorithm.robust.phases.RobustPhases.spin_torque`), its kick's size
-    (:attr:`~agent.algorithm.robust.phases.RobustPhases.kick_level`) and its own ``ẑ_C``
-    (``None``: none yet, ``ζ_i = 0``)."""
+    (:attr:`~agent.algorithm.robust.phases.RobustPhases.kick_level`), its own ``ẑ_C``
+    (``None``: none yet, ``ζ_i = 0``) and its own turn's variance
+    (:func:`~agent.algorithm.robust.rotation.own_variance`)."""
     norm2 = x[0] * x[0] + x[1] * x[1]
     held = (0.0, 0.0, 0.0) if com is None else (1.0, com[0], com[1])
-    return (norm2, gain, gain * x[0], gain * x[1], gain * norm2, *mass, torque, kick, *held)
+    return (
+        norm2,
+        gain,
+        gain * x[0],
+        gain * x[1],
+        gain * norm2,
+        *mass,
+        torque,
+        kick,
+        *held,
+        turn_variance,
+    )
 
 
 def team_mass(information: float, weighted: float, own: float) -> tuple[float, float] | None:

@@ -489,7 +489,9 @@ class Member(TeamConsensus):
     def __init__(self, robot: int, neighbours):
         self.gain_input, self.mass_input = 1.0, (0.0, 0.0, 0.0, 0.0)
         super().__init__(
-            robot, neighbours, lambda x: inputs(x, self.gain_input, self.mass_input, 0.0, 0.0, None)
+            robot,
+            neighbours,
+            lambda x: inputs(x, self.gain_input, self.mass_input, 0.0, 0.0, None, 0.0),
         )
 
     xi = property(lambda self: self["mean_square_offset"])

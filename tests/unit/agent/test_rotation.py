@@ -10,9 +10,9 @@ import statistics
 
 import pytest
 
+from agent.algorithm.estimation.consensus import delay_factor
 from agent.algorithm.robust.rotation import (
     RotationConsensus,
-    delay_factor,
     neighbourhood_turn,
     own_turn,
     turn_weight,
@@ -40,7 +40,7 @@ def _run(
     weight = {i: 1.0 / (i * i) if weighted else 0.0 for i in graph}
     rng = random.Random(seed)
     robots = {i: RotationConsensus(len(n), len(graph)) for i, n in graph.items()}
-    history = {i: {-1: (0.0, 0.0)} for i in graph}
+    history = {i: {-1: 0.0} for i in graph}
     levels = dict.fromkeys(graph, 0.0)
     theta = 0.0
     for e in range(ticks):
@@ -49,17 +49,15 @@ def _run(
         sent = {i: (e - 1 - late, history[i].get(e - 1 - late)) for i in graph}
         for i, consensus in robots.items():
             heard = [
-                (j, len(graph[j]), sent[j][0], wrapped(sent[j][1][0]), sent[j][1][1], weight[j])
+                (j, len(graph[j]), sent[j][0], wrapped(sent[j][1]), weight[j])
                 for j in graph[i]
                 if mixing and sent[j][1] is not None and sent[j][0] >= 0
             ]
-            own = i * noise
-            level_at = lambda k, i=i: history[i].get(k, (None,))[0]  # noqa: E731
             step = consensus.update(
-                e, true_turn + rng.gauss(0.0, own), own**2, heard, level_at, weight[i]
+                e, true_turn + rng.gauss(0.0, i * noise), heard, history[i].get, weight[i]
             )
             levels[i] += step
-            history[i][e] = (levels[i], consensus.variance)
+            history[i][e] = levels[i]
     return theta, robots, levels
 
 
@@ -78,9 +76,6 @@ def test_the_team_level_averages_the_robots_noise(late: int) -> None:
     ratio = statistics.pstdev(together) / statistics.pstdev(alone)
     assert 0.5 < ratio < 0.85
     assert max(spread) < (0.02 if late == 0 else 0.08)
-    # The team's turn variance, 2 ν / n with ν → the mean of (i × 0.001)².
-    for robot in team.values():
-        assert robot.turn_variance == pytest.approx(2 * 7.5e-6 / 4, rel=1e-6 if late == 0 else 0.05)
 
 
 def test_weighted_by_their_information_the_turns_average_better() -> None:
@@ -105,21 +100,17 @@ def test_without_noise_the_level_is_the_rotation_on_every_robot() -> None:
 def test_each_message_is_used_once_and_a_forgotten_instant_not_at_all() -> None:
     consensus = RotationConsensus(1, 2)
     history = {0: 0.0}
-    step = consensus.update(1, 0.1, None, [(2, 1, 0, 0.5, 0.0, 0.0)], history.get)
+    step = consensus.update(1, 0.1, [(2, 1, 0, 0.5, 0.0)], history.get)
     assert step == pytest.approx(0.1 + 0.5 * 0.5)  # a = 1 / (1 + 1)
-    assert consensus.update(2, 0.1, None, [(2, 1, 0, 0.5, 0.0, 0.0)], history.get) == pytest.approx(
-        0.1
-    )
-    assert consensus.update(8, 0.1, None, [(2, 1, 7, 0.5, 0.0, 0.0)], history.get) == pytest.approx(
-        0.1
-    )
+    assert consensus.update(2, 0.1, [(2, 1, 0, 0.5, 0.0)], history.get) == pytest.approx(0.1)
+    assert consensus.update(8, 0.1, [(2, 1, 7, 0.5, 0.0)], history.get) == pytest.approx(0.1)
 
 
 def test_a_late_level_weighs_less() -> None:
     assert delay_factor(0) == 1.0 and delay_factor(-1) == 1.0
     assert delay_factor(1) == pytest.approx(0.5)
     consensus = RotationConsensus(1, 2)
-    step = consensus.update(5, 0.0, None, [(2, 1, 3, 0.5, 0.0, 0.0)], {3: 0.0}.get)  # one late
+    step = consensus.update(5, 0.0, [(2, 1, 3, 0.5, 0.0)], {3: 0.0}.get)  # one late
     assert step == pytest.approx(0.5 * 0.5 * 0.5)
 
 
@@ -127,9 +118,7 @@ def test_levels_are_compared_modulo_two_pi() -> None:
     consensus = RotationConsensus(1, 2)
     history = {4: math.pi - 0.01}
     # The neighbour's level, sent wrapped, is 0.02 rad ahead: just past -π.
-    step = consensus.update(
-        5, 0.0, None, [(2, 1, 4, wrapped(math.pi + 0.01), 0.0, 0.0)], history.get
-    )
+    step = consensus.update(5, 0.0, [(2, 1, 4, wrapped(math.pi + 0.01), 0.0)], history.get)
     assert step == pytest.approx(0.5 * 0.02)
 
 
@@ -250,10 +239,9 @@ def test_the_weighted_level_is_the_weighted_mean_of_the_robots_turns() -> None:
     for e in range(ticks):
         for i, consensus in robots.items():
             heard = [
-                (j, len(LINE[j]), e - 1, wrapped(history[j][e - 1]), 0.0, weights[j])
-                for j in LINE[i]
+                (j, len(LINE[j]), e - 1, wrapped(history[j][e - 1]), weights[j]) for j in LINE[i]
             ]
-            step = consensus.update(e, own[i], None, heard, history[i].get, weights[i])
+            step = consensus.update(e, own[i], heard, history[i].get, weights[i])
             history[i][e] = history[i][e - 1] + step
     expected = ticks * sum(weights[i] * own[i] for i in LINE) / sum(weights.values())
     for i in LINE:

@@ -72,7 +72,7 @@ def inputs_with_temperature(robot: int):
     def inputs(x):
         norm2 = x[0] * x[0] + x[1] * x[1]
         return (
-            *(norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+            *(norm2, 1.0, x[0], x[1], norm2, *(0.0,) * 10),
             TEMPERATURES[robot],
         )
 
@@ -170,7 +170,7 @@ def test_a_mean_whose_inputs_appear_one_robot_at_a_time_stays_on_the_wire() -> N
         def inputs(x):
             norm2 = x[0] * x[0] + x[1] * x[1]
             held = (1.0, 0.3, -0.2) if tick[0] >= 3 * robot else (0.0, 0.0, 0.0)
-            return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *held)
+            return (norm2, 1.0, x[0], x[1], norm2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *held, 0.0)
 
         return inputs
 
@@ -196,3 +196,46 @@ def test_a_mean_whose_inputs_appear_one_robot_at_a_time_stays_on_the_wire() -> N
         assert c["mean_com_weight"] == pytest.approx(1.0, abs=1e-6)
         weighted = c["mean_weighted_com"]
         assert weighted == pytest.approx((0.3, -0.2), abs=1e-6)
+
+
+@pytest.mark.parametrize("late", [0, 3])
+def test_the_turns_mean_variance_follows_its_falling_inputs_however_late_the_messages(
+    late: int,
+) -> None:
+    """``ν`` (``mean_turn_variance``) is the direction filters' process noise: each robot's
+    turn variance falls by orders of magnitude once its circles are known (here from 1e-3 to
+    1e-9 rad², at another instant on each robot), and every message arrives ``late`` instants
+    late. In flow form ``ν`` reaches the new mean on every robot; averaged without flows (with
+    input tracking) it kept an error of the order of the old inputs for good."""
+    falls = {1: 30, 2: 45, 3: 60, 4: 80}
+    final = {1: 1e-9, 2: 2e-9, 3: 4e-9, 4: 1e-9}
+
+    def inputs_of(robot: int, instant):
+        def inputs(x):
+            norm2 = x[0] * x[0] + x[1] * x[1]
+            variance = 1e-3 if instant[0] < falls[robot] else final[robot]
+            return (norm2, 1.0, x[0], x[1], norm2, *(0.0,) * 9, variance)
+
+        return inputs
+
+    instant = [0]
+    team = {i: TeamConsensus(i, neighbours_of(i), inputs_of(i, instant)) for i in CONTACTS}
+    frames = {i: StillLoad(i) for i in CONTACTS}
+    sent: list[dict[int, Share]] = []
+    for tick in range(1, 1500):
+        instant[0] = tick
+        sent.append(
+            {
+                i: Share(
+                    i, tick, (0.0, 0.0), c.degree, tick - 1, Barrier(), c.state, c.shared_flows()
+                )
+                for i, c in team.items()
+            }
+        )
+        arrived = sent[-1 - late] if len(sent) > late else {}
+        for i, c in team.items():
+            frames[i].instant = tick
+            c.update(0.0, {j: arrived[j] for j in c.neighbours if j in arrived}, frames[i])
+    mean = sum(final.values()) / len(final)
+    for c in team.values():
+        assert c["mean_turn_variance"] == pytest.approx(mean, rel=1e-3)
