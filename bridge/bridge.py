@@ -411,12 +411,12 @@ class Bridge:
     def _sensor_trips(self, at: float, latest: int | None) -> bool:
         """Whether the force/torque sensor goes stale now: no usable sample read for
         ``watchdog_s`` since its last one (once one has come), while the bus has opened a
-        tick without one (:attr:`_sensor_deadline`)."""
+        tick without one (:meth:`_sensor_deadline`)."""
         if self._sensor_tick is None or latest is None or latest <= self._sensor_tick:
             return False
         if self._sensor_owed_since is None:
             self._sensor_owed_since = at
-        if self.sensor_stale or at <= self._sensor_deadline:
+        if self.sensor_stale or at <= self._sensor_deadline(self._sensor_owed_since):
             return False
         self.sensor_stale = True
         self.counts["sensor stale trips"] += 1
@@ -433,20 +433,15 @@ class Bridge:
         )
         return True
 
-    @property
-    def _sensor_deadline(self) -> float:
-        """When the sensor owed a sample is stale: ``watchdog_s`` after its last usable sample
-        was read, and at least half of ``watchdog_s`` after the bus opened the first tick
-        without one. On a bus that ticks in real time the second comes a period after the
-        sample, so the stop comes a watchdog after the last sample, however late the ticks
-        between. The second holds when the bus stood still longer than that (a lockstep bus
-        master waiting for a slow plant): its next tick's sample, a frame behind the tick,
-        gets time to come."""
-        assert self._sensor_owed_since is not None
-        return max(
-            self._sensor_heard_at + self.watchdog_s,
-            self._sensor_owed_since + self.watchdog_s / 2,
-        )
+    def _sensor_deadline(self, owed_since: float) -> float:
+        """When the sensor owed a sample since ``owed_since`` is stale: ``watchdog_s`` after
+        its last usable sample was read, and at least half of ``watchdog_s`` after the bus
+        opened the first tick without one. On a bus that ticks in real time the second comes a
+        period after the sample, so the stop comes a watchdog after the last sample, however
+        late the ticks between. The second holds when the bus stood still longer than that (a
+        lockstep bus master waiting for a slow plant): its next tick's sample, a frame behind
+        the tick, gets time to come."""
+        return max(self._sensor_heard_at + self.watchdog_s, owed_since + self.watchdog_s / 2)
 
     def halt(self, tick: int) -> can.Message:
         """The frame that stops the AGV, for ``tick``: ``ForceCommand`` in mode ZERO, or with
@@ -461,8 +456,9 @@ class Bridge:
     def next_check(self, at: float) -> float:
         """When :meth:`watchdog` has something to do next (a time like ``at``)."""
         due = []
-        if self._sensor_owed_since is not None and not self.sensor_stale:
-            due.append(max(at, self._sensor_deadline + 1e-4))
+        owed_since = self._sensor_owed_since
+        if owed_since is not None and not self.sensor_stale:
+            due.append(max(at, self._sensor_deadline(owed_since) + 1e-4))
         if self.tripped or self.sensor_stale:  # a new tick is a frame, and the loop checks
             due.append(max(at, self._last_zero_at + self.watchdog_s))  # after every frame
         elif self._last_command_at is None:

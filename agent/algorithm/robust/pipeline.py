@@ -101,7 +101,7 @@ class RobustPipeline(EstimationPipeline):
         self._variance_input = 0.0
         """This robot's own turn's variance (rad²), the input of the team's mean ``ν``."""
         super().__init__(config, neighbours)
-        self.rotation = RotationConsensus(len(neighbours), config.n)
+        self.rotation = RotationConsensus(len(neighbours))
         """The team's consensus on the load's rotation, whose level is :attr:`angle`."""
         self._rotation_weight = 0.0
         """``w_i``: the weight of this robot's last turn (:meth:`_own_turn`), sent and used by

@@ -191,9 +191,8 @@ class RotationConsensus:
     docstring). The caller keeps the level and its recent history: :meth:`update` reads it and
     returns the step."""
 
-    def __init__(self, degree: int, n: int):
+    def __init__(self, degree: int):
         self.degree = degree
-        self.n = n
         self._used: dict[int, int] = {}
         """Each neighbour's instant whose level was used last."""
         self._weights: dict[int, float] = {}

@@ -39,7 +39,7 @@ def _run(
     information ``1 / i²``. Returns the true rotation, the team and each robot's level."""
     weight = {i: 1.0 / (i * i) if weighted else 0.0 for i in graph}
     rng = random.Random(seed)
-    robots = {i: RotationConsensus(len(n), len(graph)) for i, n in graph.items()}
+    robots = {i: RotationConsensus(len(n)) for i, n in graph.items()}
     history = {i: {-1: 0.0} for i in graph}
     levels = dict.fromkeys(graph, 0.0)
     theta = 0.0
@@ -98,7 +98,7 @@ def test_without_noise_the_level_is_the_rotation_on_every_robot() -> None:
 
 
 def test_each_message_is_used_once_and_a_forgotten_instant_not_at_all() -> None:
-    consensus = RotationConsensus(1, 2)
+    consensus = RotationConsensus(1)
     history = {0: 0.0}
     step = consensus.update(1, 0.1, [(2, 1, 0, 0.5, 0.0)], history.get)
     assert step == pytest.approx(0.1 + 0.5 * 0.5)  # a = 1 / (1 + 1)
@@ -109,13 +109,13 @@ def test_each_message_is_used_once_and_a_forgotten_instant_not_at_all() -> None:
 def test_a_late_level_weighs_less() -> None:
     assert delay_factor(0) == 1.0 and delay_factor(-1) == 1.0
     assert delay_factor(1) == pytest.approx(0.5)
-    consensus = RotationConsensus(1, 2)
+    consensus = RotationConsensus(1)
     step = consensus.update(5, 0.0, [(2, 1, 3, 0.5, 0.0)], {3: 0.0}.get)  # one late
     assert step == pytest.approx(0.5 * 0.5 * 0.5)
 
 
 def test_levels_are_compared_modulo_two_pi() -> None:
-    consensus = RotationConsensus(1, 2)
+    consensus = RotationConsensus(1)
     history = {4: math.pi - 0.01}
     # The neighbour's level, sent wrapped, is 0.02 rad ahead: just past -π.
     step = consensus.update(5, 0.0, [(2, 1, 4, wrapped(math.pi + 0.01), 0.0)], history.get)
@@ -233,7 +233,7 @@ def test_the_weighted_level_is_the_weighted_mean_of_the_robots_turns() -> None:
     Σ w_i Θ_i / Σ w_i (a_ij w_i = a_ji w_j conserves Σ w_i θ_i), with any weights."""
     weights = {1: 4.0, 2: 1.0, 3: 0.5, 4: 2.0}
     own = {1: 0.001, 2: 0.002, 3: 0.003, 4: 0.004}
-    robots = {i: RotationConsensus(len(n), 4) for i, n in LINE.items()}
+    robots = {i: RotationConsensus(len(n)) for i, n in LINE.items()}
     history = {i: {-1: 0.0} for i in LINE}
     ticks = 3000
     for e in range(ticks):
