@@ -201,6 +201,11 @@ def test_the_other_profiles_frames_are_refused_and_counted(rig: VelocityRig) -> 
     rig.drives_again(len(rig.frames))
 
 
+ATTEMPTS = 5
+"""Episodes the stale-sensor test measures at most: one its own rig disturbed is measured
+again (see the test)."""
+
+
 def test_the_base_is_stopped_when_the_agent_is_killed(rig: VelocityRig) -> None:
     """kill -9 the agent: the first MotionCommand in mode STOP follows the last one in mode
     VELOCITY within the watchdog plus or minus one frame period, by the frames' kernel
@@ -251,22 +256,40 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
     Without a sample there is no measurement, so the agent stops answering and its watchdog
     would stop the base too, about as soon: here the agent's commands are played for the
     bus's newest tick (:meth:`VelocityRig.agent_heard`) so that the sensor's stop is the one
-    measured (the agent's watchdog does not trip)."""
-    rig.drives_again(len(rig.frames))
-    rig.frames.clear()
-    time.sleep(0.3)
-    try:
-        with rig.agent_heard():
-            rig.set_sensor(state)
-            stale = rig.wait(lambda s: s.sensor_stale, 10, "the sensor is stale")
-            frames = rig.frames_when(
-                lambda got: stopped_after(got, last_sample(got)),
-                f"{STOPS_SEEN} STOP frames after the last usable sample",
-            )
-    finally:  # the next tests need the sensor, whatever this one found
-        since = len(rig.frames)
-        rig.set_sensor("ok")
-    sampled = last_sample(frames)
+    measured. The bridge times the stop from the last sample once the bus has opened a tick
+    without one, within half the watchdog (:meth:`bridge.bridge.Bridge._sensor_deadline`): an
+    episode in which the rig's driver stalled longer than that before its next tick, or in
+    which the commands played stalled and the agent's watchdog tripped before the sensor's
+    stop, is not the one to judge, and is measured again (a User-Mode Linux guest was seen to
+    stall for 600 ms)."""
+    for attempt in range(1, ATTEMPTS + 1):
+        rig.drives_again(len(rig.frames))
+        rig.frames.clear()
+        time.sleep(0.3)
+        before = rig.latest()
+        try:
+            with rig.agent_heard():
+                rig.set_sensor(state)
+                stale = rig.wait(lambda s: s.sensor_stale, 10, "the sensor is stale")
+                frames = rig.frames_when(
+                    lambda got: stopped_after(got, last_sample(got)),
+                    f"{STOPS_SEEN} STOP frames after the last usable sample",
+                )
+        finally:  # the next tests need the sensor, whatever this one found
+            since = len(rig.frames)
+            rig.set_sensor("ok")
+        sampled = last_sample(frames)
+        owed_ms = (min(t for t, f in frames if isinstance(f, Sync) and t > sampled) - sampled) * 1e3
+        tripped = stale.watchdog_trips - before.watchdog_trips
+        if owed_ms <= WATCHDOG_MS / 2 and not tripped:
+            break
+        print(
+            f"\nattempt {attempt}: the next tick came {owed_ms:.0f} ms after the last sample;"
+            f" the agent's watchdog tripped {tripped} times: again"
+        )
+        rig.drives_again(since)
+    else:
+        pytest.fail(f"the rig could not keep its timing in {ATTEMPTS} attempts")
     owed = min(t for t, f in frames if isinstance(f, Sync) and t > sampled)
     stops = [t for t in commands(frames, drive=False) if t > sampled]
     delay_ms = (stops[0] - sampled) * 1e3
@@ -276,9 +299,7 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
         f" {WATCHDOG_MS} ms, period {PERIOD * 1e3:.0f} ms); {len(stops)} STOP frames; {stale}"
     )
     assert_stopped(frames, stops, delay_ms)
-    # The stale sensor stopped it, not the agent's watchdog (each trip counted once is a
-    # unit test's: a slow host's driver can stall past the watchdog before the test begins).
-    assert stale.sensor_stale and stale.sensor_stale_trips >= 1 and not stale.watchdog
+    assert stale.sensor_stale and stale.sensor_stale_trips >= 1
     why = "it reports FAULT" if state == "fault" else "no ForceTorque frame"
     assert f"({why})" in rig.bridge_log()
     rig.drives_again(since)
