@@ -34,6 +34,24 @@ ticks, converged at 10.77 s) is a manual run: ``heft vcan -- heft run
 simulator/scenarios/paper.toml --can``."""
 HIL_STALL_S = 120.0
 """No new truth for this long stalls the run: ticks of several seconds were seen there."""
+STALL_MS = WATCHDOG_MS / 2
+"""ms: an episode in which the host stalled the machine longer than this in all, while a stop
+is being timed, is measured again rather than judged (:meth:`DriverRig.stall_ms`; a User-Mode
+Linux guest was seen to stall for 600 ms)."""
+ATTEMPTS = 8
+"""Episodes a stop test measures at most, the ones the host stalled measured again."""
+STOPS_SEEN = 10
+"""Stop frames the tests read after a stop before they judge it."""
+
+
+def assert_within_watchdog(delay_ms: float, stalled_ms: float) -> None:
+    """A stop ``delay_ms`` after what caused it, by the frames' kernel timestamps, came within
+    the watchdog plus or minus one frame period, plus however long the host stood the machine
+    still meanwhile (``stalled_ms``, :meth:`DriverRig.stall_ms`): nothing in it, the bridge
+    included, could act then. (The watchdog starts when the bridge hears, before the frame
+    that the tests time is written: the stop can come up to a frame period early.)"""
+    low, high = WATCHDOG_MS - PERIOD * 1e3, WATCHDOG_MS + PERIOD * 1e3 + stalled_ms
+    assert low <= delay_ms <= high, f"{delay_ms:.1f} ms, not within {low:.0f}-{high:.1f} ms"
 
 
 def can_bus(channel: str):
@@ -143,10 +161,10 @@ class DriverRig:
     """A :class:`~bridge.devtools.rig.BridgeRig` on ``channel`` (router, ``heft bridge`` of
     ``profile`` with a :data:`WATCHDOG_MS` watchdog under ``SCHED_FIFO``, as on a robot, and
     the echo agent, pushing ``push_n`` newtons if given), and here AGV node 1's driver: the
-    frames of :meth:`tick_frames` every :data:`PERIOD`, a heartbeat every 100 ms; and a
-    reader of the frames with the ids ``listened`` (a kernel filter keeps the rest out of its
-    socket) with their kernel timestamps, in :attr:`frames`. :attr:`sent` counts every frame
-    sent from here."""
+    frames of :meth:`tick_frames` every :data:`PERIOD`, a heartbeat every 100 ms; a reader of
+    the frames with the ids ``listened`` (a kernel filter keeps the rest out of its socket)
+    with their kernel timestamps, in :attr:`frames`; and the stall monitor
+    (:meth:`stall_ms`). :attr:`sent` counts every frame sent from here."""
 
     def __init__(
         self,
@@ -170,6 +188,11 @@ class DriverRig:
             push_n=push_n,
         )
         self.rig.start()
+        self.stalls = folder / "stalls.txt"
+        self.stalls.touch()
+        self.monitor = subprocess.Popen(
+            [sys.executable, "-m", "tests.helpers.stall_monitor", str(self.stalls)]
+        )
         self.tick = 0
         self.beats = 0
         self.sent = 0
@@ -257,6 +280,16 @@ class DriverRig:
     def latest(self) -> BridgeStatus:
         return self.rig.latest()[1]
 
+    def stall_ms(self, start: float, end: float) -> float:
+        """How long (ms) the host stalled this machine in all between the wall-clock instants
+        ``start`` and ``end`` (kernel timestamps of frames), by the stall monitor
+        (:mod:`tests.helpers.stall_monitor`)."""
+        stalled = 0.0
+        for line in self.stalls.read_text().splitlines():
+            woke, late = map(float, line.split())
+            stalled += max(0.0, min(woke, end) - max(woke - late, start))
+        return stalled * 1e3
+
     def frames_when(self, enough, what: str, timeout: float = 10.0) -> list:
         """A copy of :attr:`frames` once ``enough`` holds of it: the reader may trail what
         the bridge's status already says on a loaded host, so the tests wait for the frames
@@ -272,6 +305,34 @@ class DriverRig:
 
     def wait(self, condition, timeout: float, what: str) -> BridgeStatus:
         return self.rig.wait_status(condition, timeout, what)
+
+    def stop_when_killed(self, stopped, what: str, ready=None) -> tuple:
+        """``kill -9`` the echo agent and time the stop, until an episode in which the host
+        stood the machine still for no more than :data:`STALL_MS` (at most :data:`ATTEMPTS`):
+        ``stopped(frames)`` gives the kernel timestamp of the agent's last command among
+        ``frames`` and those of the stop frames after it (``(None, [])`` before there is one);
+        the episode is judged once it has :data:`STOPS_SEEN`. ``ready()``, if given, is
+        waited for before each. The agent is started again whatever happens. Returns the
+        first status with the watchdog tripped, the frames, the last command's instant, the
+        stops' and how long the host stalled the machine in between (ms)."""
+        for attempt in range(1, ATTEMPTS + 1):
+            self.wait(lambda s: not s.watchdog, 30, "the watchdog is clear")
+            if ready is not None:
+                ready()
+            self.frames.clear()
+            time.sleep(0.5)
+            self.kill_agent()
+            try:
+                tripped = self.wait(lambda s: s.watchdog, 10, "the watchdog trips")
+                frames = self.frames_when(lambda got: len(stopped(got)[1]) >= STOPS_SEEN, what)
+            finally:  # the next tests need the agent, whatever this one found
+                self.rig.start_agent()
+            last, stops = stopped(frames)
+            stalled = self.stall_ms(last, stops[0])
+            if stalled <= STALL_MS:
+                return tripped, frames, last, stops, stalled
+            print(f"\nattempt {attempt}: the host stalled the rig for {stalled:.0f} ms: again")
+        raise AssertionError(f"the host stalled the rig in each of {ATTEMPTS} attempts")
 
     def kill_agent(self) -> None:
         """``kill -9`` the rig's echo agent, as a crash would end it (``start_agent`` brings
@@ -291,6 +352,8 @@ class DriverRig:
         self.stop.set()
         for thread in self.threads:
             thread.join(5)
+        self.monitor.terminate()
+        self.monitor.wait(30)
         self.rig.close()
         self.bus.shutdown()
         bridge = self.rig.children["bridge"]
