@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from operator import neg, sub
 from typing import TYPE_CHECKING, Protocol
 
 from agent.algorithm.estimation.consensus import metropolis_weight
@@ -189,11 +190,11 @@ class TeamConsensus:
                 for flow in s.flows:
                     if flow[0] == self.robot:
                         since = frame.turned_since(s.instant)
-                        flows[j] = tuple(-f for f in self._rotated(flow[1:], since))
+                        flows[j] = tuple(map(neg, self._rotated(flow[1:], since)))
         out = self._outflow()
         values = self._of(out, self.inputs((-out[0], -out[1])))
         previous = frame.instant - 1
-        width, plan = self._width, self._plan
+        read = self._read
         for j in self.neighbours:
             s = shares.get(j)
             if s is None:
@@ -204,23 +205,29 @@ class TeamConsensus:
             else:
                 since = frame.turned_since(s.instant)
                 c, sn = math.cos(since), math.sin(since)
-            theirs = []
-            state = s.consensus
-            for slot, kind in plan:
-                value = state[slot]
-                if kind == _NUMBER:
-                    theirs.append(value)
-                elif kind == _VECTOR:
-                    theirs.extend(value)
-                else:  # a vector of the load, turned to this instant
-                    x, y = value
-                    theirs += (c * x - sn * y, sn * x + c * y)
             z = frame.relative_position(j) or (0.0, 0.0)
-            delta = [a * (theirs[0] - values[0] + z[0]), a * (theirs[1] - values[1] + z[1])]
-            delta += [a * (theirs[k] - values[k]) for k in range(2, width)]
-            flows[j] = tuple(f - d for f, d in zip(flows[j], delta))
-            out = [f - d for f, d in zip(out, delta)]
+            delta = list(map(sub, read(s.consensus, c, sn), values))
+            delta[0] += z[0]
+            delta[1] += z[1]
+            delta = [a * d for d in delta]
+            flows[j] = tuple(map(sub, flows[j], delta))
+            out = list(map(sub, out, delta))
         self.values = self._of(out, self.inputs((-out[0], -out[1])))
+
+    def _read(self, state: Sequence, c: float, s: float) -> list[float]:
+        """A neighbour's flow-form states, flat in declaration order, its vectors of the load
+        turned by the angle whose cosine and sine are ``c`` and ``s``."""
+        theirs: list[float] = []
+        for slot, kind in self._plan:
+            value = state[slot]
+            if kind == _NUMBER:
+                theirs.append(value)
+            elif kind == _VECTOR:
+                theirs.extend(value)
+            else:  # a vector of the load, turned to this instant
+                x, y = value
+                theirs += (c * x - s * y, s * x + c * y)
+        return theirs
 
     def _of(self, out: Sequence[float], inputs: Sequence[float]) -> list[float]:
         """The states from the outflows: ``x_i = −Σ F``, then each mean's ``r_i − Σ F``."""
