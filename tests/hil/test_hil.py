@@ -14,8 +14,8 @@ import pytest
 from agent.platform.protocol import BridgeStatus
 from bridge.bench.can import FORCE_STEP, tick_of, tick_values
 from bridge.bridge import CAN_ERR_BUSOFF
-from bridge.codec import AgvCodec, AppliedForce, ForceCommand, Odometry, Sync
-from bridge.dbc import FORCE_COMMAND_BASE, SYNC_ID
+from bridge.codec import AgvCodec, AppliedForce, Odometry, Sync
+from bridge.dbc import FORCE_COMMAND_BASE
 from tests.helpers.hil import (
     PERIOD,
     STOPS_SEEN,
@@ -50,26 +50,21 @@ def test_lockstep_over_can_reproduces_the_inprocess_can_run(tmp_path: Path) -> N
 
 
 # ------------------------------------------------------------------------------ one bridge
-def force_commands(frames: list) -> list:
-    """The bridge's ``ForceCommand`` frames among ``(timestamp, frame)``."""
-    return [(t, f) for t, f in frames if isinstance(f, ForceCommand)]
-
-
 def forwarded(frames: list) -> list[int]:
     """The ticks named by the agent's commands among the bridge's ``(timestamp, frame)``
     (not the watchdog's zero force), in the order they went out on the bus."""
-    return [tick_of(f.force, FORCE_STEP) for _, f in force_commands(frames) if f.apply]
+    return [tick_of(f.force, FORCE_STEP) for _, f in frames if f.apply]
 
 
 class Rig(DriverRig):
     """A :class:`~tests.helpers.hil.DriverRig` of the force profile on :data:`RIG_CHANNEL`:
     the driver's tick is Sync, Odometry and AppliedForce, and what is read is the bridge's
-    ``ForceCommand`` frames, and its ticks' ``Sync``. Tick ``k``'s applied force carries ``k``
+    ``ForceCommand`` frames. Tick ``k``'s applied force carries ``k``
     (:func:`~bridge.bench.can.tick_values`), so the echo agent's command for it, and the
     frame the bridge writes for that, name the tick (:func:`forwarded`)."""
 
     def __init__(self, folder: Path) -> None:
-        super().__init__(folder, RIG_CHANNEL, (SYNC_ID, FORCE_COMMAND_BASE + 1))
+        super().__init__(folder, RIG_CHANNEL, (FORCE_COMMAND_BASE + 1,))
 
     def tick_frames(self, k: int) -> list:
         force = tick_values(k, FORCE_STEP)
@@ -127,12 +122,11 @@ def test_the_bridge_survives_its_interface_being_deleted_and_recreated(rig: Rig)
 def zeros_after(frames: list) -> tuple[float | None, list[float]]:
     """The kernel timestamps of the last ``ForceCommand`` applying the agent's force among
     ``frames``, and of the zero-force ones after it (``(None, [])`` without the first)."""
-    commands = force_commands(frames)
-    applied = [t for t, f in commands if f.apply]
+    applied = [t for t, f in frames if f.apply]
     if not applied:
         return None, []
     last = max(applied)
-    return last, [t for t, f in commands if not f.apply and t > last]
+    return last, [t for t, f in frames if not f.apply and t > last]
 
 
 def test_the_watchdog_commands_zero_force_when_the_agent_is_killed(rig: Rig) -> None:
@@ -203,7 +197,7 @@ def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(ri
         f" {after.decode_errors - before.decode_errors} decode errors,"
         f" {after.bus_errors - before.bus_errors} bus errors; {len(commands)} commands"
         f" forwarded, {refused} refused as too old,"
-        f" {sum(not f.apply for _, f in force_commands(frames))}"
+        f" {sum(not f.apply for _, f in frames)}"
         f" zero-force frames; {after}"
     )
     rig.paused.clear()
@@ -214,6 +208,6 @@ def test_random_frames_in_bursts_are_counted_exactly_and_the_ticks_still_flow(ri
     assert after.counter_jumps == before.counter_jumps
     assert commands == sorted(set(commands)) and set(commands) <= set(ticks)
     assert len(commands) + refused == len(ticks)  # each forwarded or refused, none lost
-    applied = [f for _, f in force_commands(frames) if f.apply]
+    applied = [f for _, f in frames if f.apply]
     assert all(f.counter == tick_of(f.force, FORCE_STEP) % 16 for f in applied)
     assert len({f.counter for f in applied}) == 16  # commands flowed all along

@@ -89,9 +89,9 @@ def last_sample(frames: list) -> float:
     return max(t for t, f in frames if isinstance(f, ForceTorque) and f.status == 0)
 
 
-def stopped_after(frames: list, since: float) -> bool:
-    """Whether :data:`STOPS_SEEN` STOP frames among ``frames`` follow the instant ``since``."""
-    return len([t for t in commands(frames, drive=False) if t > since]) >= STOPS_SEEN
+def stops_after(frames: list, since: float) -> list[float]:
+    """The timestamps of the STOP frames among ``frames`` that follow the instant ``since``."""
+    return [t for t in commands(frames, drive=False) if t > since]
 
 
 def assert_stopped(frames: list, stops: list[float], delay_ms: float, stalled_ms: float) -> None:
@@ -159,19 +159,24 @@ class VelocityRig(DriverRig):
             assert time.monotonic() < deadline, "no MotionCommand in mode VELOCITY within 30 s"
             time.sleep(0.02)
 
+    @property
+    def log(self) -> Path:
+        """The bridge's log file."""
+        return self.rig.children["bridge"].log
+
     def bridge_log(self) -> str:
-        return self.rig.children["bridge"].log.read_text(errors="replace")
+        return self.log.read_text(errors="replace")
 
     def log_size(self) -> int:
         """The bridge's log's length now (bytes), to read from later: without reading it, as
         the driver's thread shares this process."""
-        return self.rig.children["bridge"].log.stat().st_size
+        return self.log.stat().st_size
 
     def agent_stopped_first(self, since: int) -> bool:
         """Whether the agent's watchdog held the base before the sensor's stop, by the
         bridge's log from its byte ``since`` on: it was tripped then (its last trip or clear
         before that is a trip), or it trips before the log says the sensor is stale."""
-        log = self.rig.children["bridge"].log.read_bytes()
+        log = self.log.read_bytes()
         told = [
             line
             for line in log[:since].decode(errors="replace").splitlines()
@@ -240,14 +245,12 @@ def test_the_base_is_stopped_when_the_agent_is_killed(rig: VelocityRig) -> None:
             assert time.monotonic() < deadline, "every MotionCommand at standstill for 30 s"
             time.sleep(0.05)
 
-    def stops_after(frames: list) -> tuple[float | None, list[float]]:
+    def stopped(frames: list) -> tuple[float | None, list[float]]:
         drives = commands(frames, drive=True)
-        if not drives:
-            return None, []
-        return max(drives), [t for t in commands(frames, drive=False) if t > max(drives)]
+        return (max(drives), stops_after(frames, max(drives))) if drives else (None, [])
 
     tripped, frames, last_drive, stops, stalled = rig.stop_when_killed(
-        stops_after, f"{STOPS_SEEN} STOP frames after the last VELOCITY", ready=pushing
+        stopped, f"{STOPS_SEEN} STOP frames after the last VELOCITY", ready=pushing
     )
     delay_ms = (stops[0] - last_drive) * 1e3
     print(
@@ -294,14 +297,14 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
                 rig.set_sensor(state)
                 stale = rig.wait(lambda s: s.sensor_stale, 10, "the sensor is stale")
                 frames = rig.frames_when(
-                    lambda got: stopped_after(got, last_sample(got)),
+                    lambda got: len(stops_after(got, last_sample(got))) >= STOPS_SEEN,
                     f"{STOPS_SEEN} STOP frames after the last usable sample",
                 )
         finally:  # the next tests need the sensor, whatever this one found
             since = len(rig.frames)
             rig.set_sensor("ok")
         sampled = last_sample(frames)
-        stops = [t for t in commands(frames, drive=False) if t > sampled]
+        stops = stops_after(frames, sampled)
         owed = min(t for t, f in frames if isinstance(f, Sync) and t > sampled)
         owed_ms = (owed - sampled) * 1e3
         stalled = rig.stall_ms(sampled, stops[0])
