@@ -168,7 +168,7 @@ class Bridge:
         self._sensor_tick: int | None = None
         """The tick of the newest usable ``ForceTorque``."""
         self._sensor_heard_at = -math.inf
-        """When it was read."""
+        """When it was received (on the bus)."""
         self._sensor_owed_since: float | None = None
         """When the bus was first seen with a tick newer than the sensor's last sample."""
         self._sensor_status = 0
@@ -176,7 +176,7 @@ class Bridge:
 
     # ------------------------------------------------------------------ the bus → the agent
     def receive(self, message: can.Message, at: float) -> list[Measurement]:
-        """A frame from the bus, read at ``at`` (the clock of :meth:`watchdog`); the
+        """A frame from the bus, received at ``at`` (the clock of :meth:`watchdog`); the
         measurements it completes (zero or one)."""
         self.counts["frames in"] += 1
         try:
@@ -258,7 +258,7 @@ class Bridge:
         return [Measurement(self.robot, tick, tick * self.period_s, sample.velocity, force)]
 
     def _sensed(self, frame: ForceTorque, tick: int, at: float) -> bool:
-        """Whether the sensor's sample, read at ``at``, is usable (no status bit set); the
+        """Whether the sensor's sample, received at ``at``, is usable (no status bit set); the
         sensor is heard only then."""
         if frame.status:
             self.counts["sensor faults"] += 1
@@ -409,7 +409,7 @@ class Bridge:
         return [self.halt(latest)]
 
     def _sensor_trips(self, at: float, latest: int | None) -> bool:
-        """Whether the force/torque sensor goes stale now: no usable sample read for
+        """Whether the force/torque sensor goes stale now: no usable sample received for
         ``watchdog_s`` since its last one (once one has come), while the bus has opened a
         tick without one (:meth:`_sensor_deadline`)."""
         if self._sensor_tick is None or latest is None or latest <= self._sensor_tick:
@@ -435,7 +435,7 @@ class Bridge:
 
     def _sensor_deadline(self, owed_since: float) -> float:
         """When the sensor owed a sample since ``owed_since`` is stale: ``watchdog_s`` after
-        its last usable sample was read, and at least half of ``watchdog_s`` after the bus
+        its last usable sample was received, and at least half of ``watchdog_s`` after the bus
         opened the first tick without one. On a bus that ticks in real time the second comes a
         period after the sample, so the stop comes a watchdog after the last sample, however
         late the ticks between. The second holds when the bus stood still longer than that (a

@@ -32,7 +32,7 @@ from bridge.codec import (
 )
 from bridge.config import CanSettings, load_bridge_config
 from bridge.dbc import MAX_FORCE, PROFILES
-from bridge.node import BridgeNode, open_bus
+from bridge.node import BUS_TIME_S, BridgeNode, bus_time, open_bus
 from bridge.timing import EPOCH, ClockTicks, SyncTicks
 from tests.helpers.random_frames import random_frames
 
@@ -527,3 +527,15 @@ def test_100000_random_frames_are_counted_by_reason_while_the_valid_traffic_flow
 def driving(frame: ForceCommand | MotionCommand) -> bool:
     """Whether the bridge's frame carries a command (not the watchdog's zero force or STOP)."""
     return frame.apply if isinstance(frame, ForceCommand) else frame.drive
+
+
+def test_a_frame_counts_from_when_it_was_on_the_bus() -> None:
+    """A frame that waited 30 ms for the reader counts from its receive timestamp (the
+    kernel's, on the wall clock), on the watchdog's clock; a stamp that is not on this host's
+    wall clock (an adapter's own epoch, or in the future) counts from the reading."""
+    before = time.monotonic()
+    waited = bus_time(can.Message(timestamp=time.time() - 0.030))
+    assert before - 0.032 < waited < time.monotonic() - 0.029
+    for stamp in (0.0, time.time() - 2 * BUS_TIME_S, time.time() + 0.5):
+        before = time.monotonic()
+        assert before <= bus_time(can.Message(timestamp=stamp)) <= time.monotonic()
