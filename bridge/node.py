@@ -102,9 +102,7 @@ def bus_time(message: can.Message) -> float:
     in the kernel, on the wall clock, so its age when the reader gets it is ``time.time()``
     minus that stamp; a frame that waited for this process (its reader thread, busy elsewhere or
     not yet scheduled) counts from when it came. A stamp more than :data:`BUS_TIME_S` old or in
-    the future is not taken: the frame counts from now. (The sensor's watchdog counted from the
-    reading: in CI's User-Mode Linux guest a stop came 110.7 ms after the last sample on the bus
-    and 100 ms after the bridge read it, with no stall of the guest seen.)"""
+    the future is not taken: the frame counts from now."""
     now = time.monotonic()
     age = time.time() - message.timestamp
     return now - age if 0.0 <= age <= BUS_TIME_S else now
