@@ -15,16 +15,21 @@ The I/O around a :class:`~bridge.bridge.Bridge`:
   :data:`STATUS_EVERY_S` and whenever its watchdog (or, with the velocity profile, its stale
   sensor stop) trips or clears.
 
-It runs until SIGINT, SIGTERM or SIGHUP, and then commands zero force (standstill with the
-velocity profile) before it leaves. The team's ``stop`` message ends a run, not the robot's
-link: the bridge commands zero force (standstill) and keeps running.
+Its log is written by a thread of its own (:func:`log_aside`): a slow log (a pipe nobody
+reads for a while, a file on a slow disk) never holds a stop frame. It runs until SIGINT,
+SIGTERM or SIGHUP, and then commands zero force (standstill with the velocity profile) before
+it leaves. The team's ``stop`` message ends a run, not the robot's link: the bridge commands
+zero force (standstill) and keeps running.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
+import logging.handlers
 import os
+import queue
 import socket
 import threading
 import time
@@ -336,12 +341,36 @@ def use_realtime_priority(priority: int) -> None:
     log.info("real-time scheduling: SCHED_FIFO at priority %d", priority)
 
 
+@contextlib.contextmanager
+def log_aside():
+    """While in the block, this process's log records are queued where they are made and
+    written by a thread of their own, through the handlers the root logger had; all of them
+    written by the end of the block."""
+    root = logging.getLogger()
+    handlers = root.handlers[:]
+    records: queue.SimpleQueue = queue.SimpleQueue()
+    writer = logging.handlers.QueueListener(records, *handlers, respect_handler_level=True)
+    root.handlers = [logging.handlers.QueueHandler(records)]
+    writer.start()
+    try:
+        yield
+    finally:
+        writer.stop()
+        root.handlers = handlers
+
+
 def run_bridge(config: BridgeConfig, stop: threading.Event | None = None) -> int:
-    """Run the bridge of ``config`` until stopped (SIGINT, SIGTERM or SIGHUP);
-    :class:`BusUnavailable` if its bus cannot be opened at the start."""
-    if config.can.realtime_priority:  # before any thread starts: they all inherit it
+    """Run the bridge of ``config`` until stopped (SIGINT, SIGTERM or SIGHUP), its log
+    written aside (:func:`log_aside`); :class:`BusUnavailable` if its bus cannot be opened at
+    the start."""
+    stop = stop or StopSignals().take().event  # before any thread: all inherit the mask
+    with log_aside():
+        return _run_bridge(config, stop)
+
+
+def _run_bridge(config: BridgeConfig, stop: threading.Event) -> int:
+    if config.can.realtime_priority:  # before the loop's threads start: they inherit it
         use_realtime_priority(config.can.realtime_priority)
-    stop = stop or StopSignals().take().event
     robot = config.robot.robot
     rejects = RejectLog(log, f"bridge {robot}")
     with open_session(config.zenoh) as session:

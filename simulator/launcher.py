@@ -122,11 +122,14 @@ BRIDGE_WATCHDOG_MS = 200
 """The bridges' command watchdog in a real-time CAN run: 20 sensor periods of the paper at
 100 Hz, longer in proportion when the wall clock runs slower than real time
 (``run.real_time_factor``)."""
-LOCKSTEP_WATCHDOG_MS = 5000
-"""The bridges' watchdog in a lockstep CAN run. There a tripped watchdog changes nothing (the
-plant waits for the agent's own command), but its ZERO frames, one per period per bus, load
-the plant and slow the run further where the machine is slow (User-Mode Linux): it trips only
-when an agent is silent for much longer than any tick takes."""
+LOCKSTEP_WATCHDOG_MS = 10_000
+"""The bridges' watchdog in a lockstep CAN run, the longest ``[can] watchdog_ms`` allows. There
+the plant waits for each agent's own command, so a trip keeps nothing safe, and it changes the
+run: a force bridge's ZERO frames, one per period per bus, load the plant and slow it further
+where the machine is slow, and a velocity bridge's stop forgets its admittance loop's state,
+which a run in one process does not. It should trip only when an agent is gone. In User-Mode
+Linux, at a run's ninth and tenth ticks, each of four velocity bridges heard no command for
+5.0-5.6 s, and a 5 s watchdog tripped on all four (``make hil``: two runs in eleven)."""
 PLANT_START_TIMEOUT_S = 300.0
 """How long the plant waits for every agent (and bridge) to come up. Ten processes that each
 import numpy took 40 s to come up in User-Mode Linux; an agent that dies on the way is seen

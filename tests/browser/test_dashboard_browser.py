@@ -262,7 +262,11 @@ def test_the_page_shows_a_live_run_converging_and_replays_it(tmp_path: Path) -> 
                     "window.heft.source.mode === 'replay' && window.heft.scene.table.final",
                     timeout=20_000,
                 )
-                assert page.inner_text("#source").startswith("REPLAY")
+                # The badge is drawn on the animation frame after the state arrives.
+                page.wait_for_function(
+                    "document.querySelector('#source').textContent.startsWith('REPLAY')",
+                    timeout=5_000,
+                )
                 assert errors == []
         finally:
             if processes is not None:

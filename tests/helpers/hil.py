@@ -38,6 +38,11 @@ STALL_MS = WATCHDOG_MS / 2
 """ms: an episode in which the host stalled the machine longer than this in all, while a stop
 is being timed, is measured again rather than judged (:meth:`DriverRig.stall_ms`; a User-Mode
 Linux guest was seen to stall for 600 ms)."""
+LATE_TRIP_MS = PERIOD * 1e3 / 2
+"""ms: an episode in which the bridge, by its own log, tripped a stop more than this after its
+deadline is measured again rather than judged: the machine held the bridge's loop when it was
+due (a User-Mode Linux guest held it 8 ms while its stall monitor, a process of its own, saw
+2.9 ms)."""
 ATTEMPTS = 8
 """Episodes a stop test measures at most, the ones the host stalled measured again."""
 STOPS_SEEN = 10

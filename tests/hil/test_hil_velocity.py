@@ -7,6 +7,7 @@ hil``)."""
 from __future__ import annotations
 
 import contextlib
+import re
 import threading
 import time
 from pathlib import Path
@@ -28,6 +29,7 @@ from bridge.codec import (
 from bridge.dbc import FORCE_TORQUE_BASE, MOTION_COMMAND_BASE, SENSOR_STATUS_BITS, SYNC_ID
 from tests.helpers.hil import (
     ATTEMPTS,
+    LATE_TRIP_MS,
     PERIOD,
     RIG_TEAM,
     STALL_MS,
@@ -172,6 +174,22 @@ class VelocityRig(DriverRig):
         the driver's thread shares this process."""
         return self.log.stat().st_size
 
+    def sensor_trip_late_ms(self, since: int) -> float:
+        """How long after its deadline the bridge tripped the sensor's stop that its log tells
+        from its byte ``since`` on, by its own clock: the time it gives since the last usable
+        sample, less the watchdog (ms). The log is written by a thread of the bridge's own:
+        waited for."""
+        deadline = time.monotonic() + 10
+        while True:
+            told = re.search(
+                rf"{SENSOR_STALE} .*? for (\d+) ms \(watchdog",
+                self.log.read_bytes()[since:].decode(errors="replace"),
+            )
+            if told:
+                return float(told.group(1)) - WATCHDOG_MS
+            assert time.monotonic() < deadline, "the bridge's log does not say the sensor is stale"
+            time.sleep(0.05)
+
     def agent_stopped_first(self, since: int) -> bool:
         """Whether the agent's watchdog held the base before the sensor's stop, by the
         bridge's log from its byte ``since`` on: it was tripped then (its last trip or clear
@@ -286,7 +304,9 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
       after the last sample: the bridge then gives the sample that long from that tick
       (:meth:`bridge.bridge.Bridge._sensor_deadline`), as it should;
     - the commands played stalled and the agent's watchdog held the base before the sensor's
-      stop (:meth:`VelocityRig.agent_stopped_first`)."""
+      stop (:meth:`VelocityRig.agent_stopped_first`);
+    - the bridge tripped more than :data:`~tests.helpers.hil.LATE_TRIP_MS` after its deadline by
+      its own log (:meth:`VelocityRig.sensor_trip_late_ms`): the machine held its loop."""
     for attempt in range(1, ATTEMPTS + 1):
         rig.drives_again(len(rig.frames))
         rig.frames.clear()
@@ -309,12 +329,19 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
         owed_ms = (owed - sampled) * 1e3
         stalled = rig.stall_ms(sampled, stops[0])
         agent_first = rig.agent_stopped_first(logged)
-        if stalled <= STALL_MS and owed_ms <= WATCHDOG_MS / 2 and not agent_first:
+        late_ms = rig.sensor_trip_late_ms(logged) if not agent_first else 0.0
+        if (
+            stalled <= STALL_MS
+            and owed_ms <= WATCHDOG_MS / 2
+            and not agent_first
+            and late_ms <= LATE_TRIP_MS
+        ):
             break
         print(
             f"\nattempt {attempt}: the host stalled the rig for {stalled:.0f} ms; the next tick"
             f" came {owed_ms:.0f} ms after the last sample; the agent's watchdog"
-            f" {'held' if agent_first else 'did not hold'} the base first: again"
+            f" {'held' if agent_first else 'did not hold'} the base first; the bridge tripped"
+            f" {late_ms:.0f} ms after its deadline: again"
         )
         rig.drives_again(since)
     else:

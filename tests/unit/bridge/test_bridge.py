@@ -32,7 +32,7 @@ from bridge.codec import (
 )
 from bridge.config import CanSettings, load_bridge_config
 from bridge.dbc import MAX_FORCE, PROFILES
-from bridge.node import BUS_TIME_S, BridgeNode, bus_time, open_bus
+from bridge.node import BUS_TIME_S, BridgeNode, bus_time, log_aside, open_bus
 from bridge.timing import EPOCH, ClockTicks, SyncTicks
 from tests.helpers.random_frames import random_frames
 
@@ -539,3 +539,36 @@ def test_a_frame_counts_from_when_it_was_on_the_bus() -> None:
     for stamp in (0.0, time.time() - 2 * BUS_TIME_S, time.time() + 0.5):
         before = time.monotonic()
         assert before <= bus_time(can.Message(timestamp=stamp)) <= time.monotonic()
+
+
+def test_the_log_written_aside_is_all_written_through_the_handlers_it_had() -> None:
+    """Inside :func:`log_aside` a record is handed over where it is made, its message already
+    formatted, and written by another thread through the root logger's handlers; every one
+    is written, in order, by the end of the block, and the handlers are the root's again."""
+
+    class Held(logging.Handler):
+        def __init__(self) -> None:
+            super().__init__()
+            self.lines: list[tuple[str, str]] = []
+            self.opened = threading.Event()
+
+        def emit(self, record: logging.LogRecord) -> None:
+            self.opened.wait(5)  # a slow log: the caller does not wait for it
+            self.lines.append((threading.current_thread().name, record.getMessage()))
+
+    root = logging.getLogger()
+    held = Held()
+    before = root.handlers[:]
+    root.handlers = [held]
+    try:
+        with log_aside():
+            started = time.monotonic()
+            for k in range(100):
+                logging.getLogger("heft.bridge").warning("line %d", k)
+            assert time.monotonic() - started < 1.0 and held.lines == []
+            held.opened.set()
+        assert [line for _, line in held.lines] == [f"line {k}" for k in range(100)]
+        assert {name for name, _ in held.lines} != {threading.current_thread().name}
+        assert root.handlers == [held]
+    finally:
+        root.handlers = before
