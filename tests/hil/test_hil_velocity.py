@@ -96,13 +96,29 @@ def stops_after(frames: list, since: float) -> list[float]:
     return [t for t in commands(frames, drive=False) if t > since]
 
 
+def frames_before(frames: list, until: float, span_s: float = 0.15) -> str:
+    """The ``frames`` in the ``span_s`` up to the instant ``until``, one a line: ms before it,
+    the frame."""
+    return "\n".join(
+        f"{(t - until) * 1e3:8.1f} ms {f}"
+        for t, f in sorted(frames, key=lambda frame: frame[0])
+        if until - span_s <= t <= until
+    )
+
+
 def assert_stopped(frames: list, stops: list[float], delay_ms: float, stalled_ms: float) -> None:
     """The base is stopped: the first of the ``stops`` (the STOP frames' timestamps) came
     ``delay_ms`` after what stops it, within the watchdog plus or minus one frame period, plus
     the ``stalled_ms`` the host stood the machine still meanwhile
     (:func:`~tests.helpers.hil.assert_within_watchdog`), then one a tick (the tests read
-    :data:`STOPS_SEEN` of them) and no MotionCommand in mode VELOCITY among the ``frames``."""
-    assert_within_watchdog(delay_ms, stalled_ms)
+    :data:`STOPS_SEEN` of them) and no MotionCommand in mode VELOCITY among the ``frames``.
+    If not, the frames up to the first stop are told (:func:`frames_before`)."""
+    try:
+        assert_within_watchdog(delay_ms, stalled_ms)
+    except AssertionError as err:
+        raise AssertionError(
+            f"{err}; the frames before the stop:\n{frames_before(frames, stops[0])}"
+        ) from None
     assert len(stops) >= STOPS_SEEN
     assert not commands([(t, f) for t, f in frames if t > stops[0]], drive=True)
 
