@@ -7,6 +7,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import io
+import re
 import signal
 import subprocess
 import sys
@@ -38,6 +39,8 @@ STALL_MS = WATCHDOG_MS / 2
 """ms: an episode in which the host stalled the machine longer than this in all, while a stop
 is being timed, is measured again rather than judged (:meth:`DriverRig.stall_ms`; a User-Mode
 Linux guest was seen to stall for 600 ms)."""
+AGENT_SILENT = "no command for"
+"""What the bridge logs when its agent's watchdog trips (:meth:`bridge.bridge.Bridge.watchdog`)."""
 LATE_TRIP_MS = PERIOD * 1e3 / 2
 """ms: an episode in which the bridge, by its own log, tripped a stop more than this after its
 deadline is measured again rather than judged: the machine held the bridge's loop when it was
@@ -311,9 +314,40 @@ class DriverRig:
     def wait(self, condition, timeout: float, what: str) -> BridgeStatus:
         return self.rig.wait_status(condition, timeout, what)
 
+    @property
+    def log(self) -> Path:
+        """The bridge's log file."""
+        return self.rig.children["bridge"].log
+
+    def bridge_log(self) -> str:
+        return self.log.read_text(errors="replace")
+
+    def log_size(self) -> int:
+        """The bridge's log's length now (bytes), to read from later: without reading it, as
+        the driver's thread shares this process."""
+        return self.log.stat().st_size
+
+    def trip_late_ms(self, told: str, since: int) -> float:
+        """How long after its deadline the bridge tripped the first stop its log tells from
+        its byte ``since`` on in a line with ``told`` (:data:`AGENT_SILENT`, or the velocity
+        profile's stale sensor), by its own clock: the silence the line gives, less the
+        watchdog (ms). The log is written by a thread of the bridge's own: waited for."""
+        deadline = time.monotonic() + 10
+        while True:
+            line = re.search(
+                rf"{re.escape(told)}(?:.*? for)? (\d+) ms \(watchdog",
+                self.log.read_bytes()[since:].decode(errors="replace"),
+            )
+            if line:
+                return float(line.group(1)) - WATCHDOG_MS
+            assert time.monotonic() < deadline, f"the bridge's log does not say {told!r}"
+            time.sleep(0.05)
+
     def stop_when_killed(self, stopped, what: str, ready=None) -> tuple:
         """``kill -9`` the echo agent and time the stop, until an episode in which the host
-        stood the machine still for no more than :data:`STALL_MS` (at most :data:`ATTEMPTS`):
+        stood the machine still for no more than :data:`STALL_MS` and the bridge, by its own
+        log, tripped no more than :data:`LATE_TRIP_MS` after its deadline (at most
+        :data:`ATTEMPTS`):
         ``stopped(frames)`` gives the kernel timestamp of the agent's last command among
         ``frames`` and those of the stop frames after it (``(None, [])`` before there is one);
         the episode is judged once it has :data:`STOPS_SEEN`. ``ready()``, if given, is
@@ -326,6 +360,7 @@ class DriverRig:
                 ready()
             self.frames.clear()
             time.sleep(0.5)
+            logged = self.log_size()
             self.kill_agent()
             try:
                 tripped = self.wait(lambda s: s.watchdog, 10, "the watchdog trips")
@@ -334,10 +369,16 @@ class DriverRig:
                 self.rig.start_agent()
             last, stops = stopped(frames)
             stalled = self.stall_ms(last, stops[0])
-            if stalled <= STALL_MS:
+            late_ms = self.trip_late_ms(AGENT_SILENT, logged)
+            if stalled <= STALL_MS and late_ms <= LATE_TRIP_MS:
                 return tripped, frames, last, stops, stalled
-            print(f"\nattempt {attempt}: the host stalled the rig for {stalled:.0f} ms: again")
-        raise AssertionError(f"the host stalled the rig in each of {ATTEMPTS} attempts")
+            print(
+                f"\nattempt {attempt}: the host stalled the rig for {stalled:.0f} ms; the bridge"
+                f" tripped {late_ms:.0f} ms after its deadline: again"
+            )
+        raise AssertionError(
+            f"the host stalled the rig, or the bridge tripped late, in each of {ATTEMPTS} attempts"
+        )
 
     def kill_agent(self) -> None:
         """``kill -9`` the rig's echo agent, as a crash would end it (``start_agent`` brings

@@ -7,7 +7,6 @@ hil``)."""
 from __future__ import annotations
 
 import contextlib
-import re
 import threading
 import time
 from pathlib import Path
@@ -28,6 +27,7 @@ from bridge.codec import (
 )
 from bridge.dbc import FORCE_TORQUE_BASE, MOTION_COMMAND_BASE, SENSOR_STATUS_BITS, SYNC_ID
 from tests.helpers.hil import (
+    AGENT_SILENT,
     ATTEMPTS,
     LATE_TRIP_MS,
     PERIOD,
@@ -51,9 +51,9 @@ PUSH_N = 5.0
 """N: the echo agent's pushes (``--push``)."""
 UNLOADED = (0.5, -0.25)
 """N: the sensor's raw reading, its bias alone (nothing presses on it)."""
-AGENT_SILENT, AGENT_BACK, SENSOR_STALE = "no command for", "commands are back", "sensor stale"
-"""What the bridge logs when its agent's watchdog trips, when it clears, and when the sensor is
-stale (:meth:`bridge.bridge.Bridge.watchdog`)."""
+AGENT_BACK, SENSOR_STALE = "commands are back", "sensor stale"
+"""What the bridge logs when its agent's watchdog clears (it trips: ``AGENT_SILENT``), and when
+the sensor is stale (:meth:`bridge.bridge.Bridge.watchdog`)."""
 FAULT = 1 << next(bit for bit, name in SENSOR_STATUS_BITS.items() if name == "FAULT")
 
 
@@ -177,35 +177,6 @@ class VelocityRig(DriverRig):
             assert time.monotonic() < deadline, "no MotionCommand in mode VELOCITY within 30 s"
             time.sleep(0.02)
 
-    @property
-    def log(self) -> Path:
-        """The bridge's log file."""
-        return self.rig.children["bridge"].log
-
-    def bridge_log(self) -> str:
-        return self.log.read_text(errors="replace")
-
-    def log_size(self) -> int:
-        """The bridge's log's length now (bytes), to read from later: without reading it, as
-        the driver's thread shares this process."""
-        return self.log.stat().st_size
-
-    def sensor_trip_late_ms(self, since: int) -> float:
-        """How long after its deadline the bridge tripped the sensor's stop that its log tells
-        from its byte ``since`` on, by its own clock: the time it gives since the last usable
-        sample, less the watchdog (ms). The log is written by a thread of the bridge's own:
-        waited for."""
-        deadline = time.monotonic() + 10
-        while True:
-            told = re.search(
-                rf"{SENSOR_STALE} .*? for (\d+) ms \(watchdog",
-                self.log.read_bytes()[since:].decode(errors="replace"),
-            )
-            if told:
-                return float(told.group(1)) - WATCHDOG_MS
-            assert time.monotonic() < deadline, "the bridge's log does not say the sensor is stale"
-            time.sleep(0.05)
-
     def agent_stopped_first(self, since: int) -> bool:
         """Whether the agent's watchdog held the base before the sensor's stop, by the
         bridge's log from its byte ``since`` on: it was tripped then (its last trip or clear
@@ -322,7 +293,7 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
     - the commands played stalled and the agent's watchdog held the base before the sensor's
       stop (:meth:`VelocityRig.agent_stopped_first`);
     - the bridge tripped more than :data:`~tests.helpers.hil.LATE_TRIP_MS` after its deadline by
-      its own log (:meth:`VelocityRig.sensor_trip_late_ms`): the machine held its loop."""
+      its own log (:meth:`~tests.helpers.hil.DriverRig.trip_late_ms`): the machine held its loop."""
     for attempt in range(1, ATTEMPTS + 1):
         rig.drives_again(len(rig.frames))
         rig.frames.clear()
@@ -345,7 +316,7 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
         owed_ms = (owed - sampled) * 1e3
         stalled = rig.stall_ms(sampled, stops[0])
         agent_first = rig.agent_stopped_first(logged)
-        late_ms = rig.sensor_trip_late_ms(logged) if not agent_first else 0.0
+        late_ms = rig.trip_late_ms(SENSOR_STALE, logged) if not agent_first else 0.0
         if (
             stalled <= STALL_MS
             and owed_ms <= WATCHDOG_MS / 2
