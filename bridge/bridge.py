@@ -20,8 +20,11 @@ checked
 - :meth:`Bridge.watchdog`, called after every frame and at :meth:`Bridge.next_check`: once
   armed by a first command, if no valid command came for ``watchdog_s`` the bridge commands
   zero force (``ForceCommand`` in mode ZERO) on every tick the bus opens, and every
-  ``watchdog_s`` without one, until commands return; each trip is logged and counted, and
-  :meth:`Bridge.status` says so.
+  ``watchdog_s`` without one, until commands return: a command for a tick the bus opened at
+  or after the trip (an older one, sent before the agent fell silent and late from the
+  network, is no sign that it is back: refused as ``stale after a stop``; on vcan, commands
+  for ticks 93 and 94 came in after the stop at tick 99 and drove the base again for 40 ms);
+  each trip is logged and counted, and :meth:`Bridge.status` says so.
 
 With the velocity profile (``[can] profile = "velocity"``, :mod:`bridge.dbc`) the AGV is a base
 that takes velocity commands and a force/torque sensor at its contact, and the bridge closes
@@ -156,6 +159,8 @@ class Bridge:
         self._last_counter: dict[type, int] = {}
         self._last_sync: int | None = None
         self._last_command_at: float | None = None
+        self._tripped_tick = 0
+        """The bus's newest tick when the watchdog last tripped."""
         self._last_zero_at = -math.inf
         self._zero_tick: int | None = None
         """The tick of the last ZERO (STOP) frame."""
@@ -299,6 +304,10 @@ class Bridge:
         if command.tick < latest - (COUNTER_MODULO - 1):
             self.rejects("command", f"tick {command.tick} at tick {latest}", "too old")
             return []
+        if self.tripped and command.tick < self._tripped_tick:
+            what = f"tick {command.tick}: the watchdog tripped at tick {self._tripped_tick}"
+            self.rejects("command", what, "stale after a stop")
+            return []
         if self.velocity_profile:
             return self._drive(command, at)
         force, clamped = clamp_force(command.force)
@@ -390,6 +399,7 @@ class Bridge:
         latest = latest or 0
         if agent_silent and not self.tripped:
             self.tripped = tripped = True
+            self._tripped_tick = latest
             self.counts["watchdog trips"] += 1
             silent_ms = (at - self._last_command_at) * 1e3
             log.warning(

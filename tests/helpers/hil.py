@@ -327,19 +327,19 @@ class DriverRig:
         the driver's thread shares this process."""
         return self.log.stat().st_size
 
-    def trip_late_ms(self, told: str, since: int) -> float:
-        """How long after its deadline the bridge tripped the first stop its log tells from
-        its byte ``since`` on in a line with ``told`` (:data:`AGENT_SILENT`, or the velocity
-        profile's stale sensor), by its own clock: the silence the line gives, less the
-        watchdog (ms). The log is written by a thread of the bridge's own: waited for."""
+    def trip_silence_ms(self, told: str, since: int) -> float:
+        """The silence (ms) at which the bridge tripped the stop in force, by its own clock:
+        the last stop its log tells from its byte ``since`` on, in a line with ``told``
+        (:data:`AGENT_SILENT`: the agent's; the velocity profile's stale sensor: since its last
+        usable sample). The log is written by a thread of the bridge's own: waited for."""
         deadline = time.monotonic() + 10
         while True:
-            line = re.search(
+            said = re.findall(
                 rf"{re.escape(told)}(?:.*? for)? (\d+) ms \(watchdog",
                 self.log.read_bytes()[since:].decode(errors="replace"),
             )
-            if line:
-                return float(line.group(1)) - WATCHDOG_MS
+            if said:
+                return float(said[-1])
             assert time.monotonic() < deadline, f"the bridge's log does not say {told!r}"
             time.sleep(0.05)
 
@@ -355,12 +355,12 @@ class DriverRig:
         first status with the watchdog tripped, the frames, the last command's instant, the
         stops' and how long the host stalled the machine in between (ms)."""
         for attempt in range(1, ATTEMPTS + 1):
+            logged = self.log_size()  # the trip in force at the kill, a stall's too, is after
             self.wait(lambda s: not s.watchdog, 30, "the watchdog is clear")
             if ready is not None:
                 ready()
             self.frames.clear()
             time.sleep(0.5)
-            logged = self.log_size()
             self.kill_agent()
             try:
                 tripped = self.wait(lambda s: s.watchdog, 10, "the watchdog trips")
@@ -369,7 +369,7 @@ class DriverRig:
                 self.rig.start_agent()
             last, stops = stopped(frames)
             stalled = self.stall_ms(last, stops[0])
-            late_ms = self.trip_late_ms(AGENT_SILENT, logged)
+            late_ms = self.trip_silence_ms(AGENT_SILENT, logged) - WATCHDOG_MS
             if stalled <= STALL_MS and late_ms <= LATE_TRIP_MS:
                 return tripped, frames, last, stops, stalled
             print(

@@ -292,8 +292,9 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
       (:meth:`bridge.bridge.Bridge._sensor_deadline`), as it should;
     - the commands played stalled and the agent's watchdog held the base before the sensor's
       stop (:meth:`VelocityRig.agent_stopped_first`);
-    - the bridge tripped more than :data:`~tests.helpers.hil.LATE_TRIP_MS` after its deadline by
-      its own log (:meth:`~tests.helpers.hil.DriverRig.trip_late_ms`): the machine held its loop."""
+    - the bridge tripped more than :data:`~tests.helpers.hil.LATE_TRIP_MS` after its deadline
+      by its own log (:meth:`~tests.helpers.hil.DriverRig.trip_silence_ms`): the machine held
+      its loop."""
     for attempt in range(1, ATTEMPTS + 1):
         rig.drives_again(len(rig.frames))
         rig.frames.clear()
@@ -316,7 +317,8 @@ def test_the_base_is_stopped_when_the_force_torque_sensor_is_stale(
         owed_ms = (owed - sampled) * 1e3
         stalled = rig.stall_ms(sampled, stops[0])
         agent_first = rig.agent_stopped_first(logged)
-        late_ms = rig.trip_late_ms(SENSOR_STALE, logged) if not agent_first else 0.0
+        due_ms = max(WATCHDOG_MS, owed_ms + WATCHDOG_MS / 2)  # Bridge._sensor_deadline
+        late_ms = rig.trip_silence_ms(SENSOR_STALE, logged) - due_ms if not agent_first else 0.0
         if (
             stalled <= STALL_MS
             and owed_ms <= WATCHDOG_MS / 2

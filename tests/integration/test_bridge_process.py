@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 from agent.platform.children import free_port
@@ -36,8 +37,10 @@ def test_a_bridge_leaves_on_sigterm_with_its_whole_log(tmp_path: Path) -> None:
             text=True,
             env={**os.environ, "PYTHONPATH": str(ROOT)},
         )
+        lines: list[str] = []
+        watchdog = threading.Timer(60, process.kill)  # a bridge that never comes up
+        watchdog.start()
         try:
-            lines = []
             for line in process.stdout:  # up: its loop runs
                 lines.append(line)
                 if UP in line:
@@ -46,6 +49,7 @@ def test_a_bridge_leaves_on_sigterm_with_its_whole_log(tmp_path: Path) -> None:
             process.send_signal(signal.SIGTERM)
             rest, _ = process.communicate(timeout=60)
         finally:
+            watchdog.cancel()
             if process.poll() is None:
                 process.kill()
                 process.communicate()
