@@ -22,9 +22,8 @@ checked
   zero force (``ForceCommand`` in mode ZERO) on every tick the bus opens, and every
   ``watchdog_s`` without one, until commands return: a command for a tick the bus opened at
   or after the trip (an older one, sent before the agent fell silent and late from the
-  network, is no sign that it is back: refused as ``stale after a stop``; on vcan, commands
-  for ticks 93 and 94 came in after the stop at tick 99 and drove the base again for 40 ms);
-  each trip is logged and counted, and :meth:`Bridge.status` says so.
+  network, is no sign that it is back: refused as ``stale after a stop``); each trip is
+  logged and counted, and :meth:`Bridge.status` says so.
 
 With the velocity profile (``[can] profile = "velocity"``, :mod:`bridge.dbc`) the AGV is a base
 that takes velocity commands and a force/torque sensor at its contact, and the bridge closes
