@@ -73,6 +73,7 @@ def test_the_final_instant_is_the_first_at_which_every_robot_is_done(monkeypatch
             assert collector.finished() and collector.final.truth.tick == 100
         else:
             monkeypatch.setattr(launcher, "FINAL_GRACE_S", 0.0)
+            monkeypatch.setattr(launcher, "FINAL_GRACE_TICKS", 0)  # not this test's pace
             assert collector.finished() and collector.final.truth.tick == 101
             monkeypatch.undo()
 
