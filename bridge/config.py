@@ -11,6 +11,7 @@ ignores ``[can]``; the bridge reads the rest as the agent does
     bitrate = 1000000          # bit/s (set on the interface by the system, see deploy/)
     node = 1                   # the AGV's node id in the CAN ids (default: the robot's id)
     watchdog_ms = 100          # no valid command for this long: zero force
+    watchdog_clock = "wall"    # what the watchdog's time is ("bus": ticks, lockstep sims only)
     time_source = "sync"       # ticks from the bus's Sync frames ("clock": this host's clock)
     realtime_priority = 0      # 1..99: run under SCHED_FIFO at this priority (0: do not)
     profile = "force"          # the AGV's protocol: "force" (agv.dbc) or "velocity"
@@ -56,6 +57,8 @@ from bridge.dbc import MAX_NODE, PROFILES
 
 TIME_SOURCES = ("sync", "clock")
 """How the bridge gives each sample its tick (see :mod:`bridge.timing`)."""
+WATCHDOG_CLOCKS = ("wall", "bus")
+"""What the bridge's watchdog times silences with (:attr:`CanSettings.watchdog_clock`)."""
 
 
 @dataclass(frozen=True)
@@ -74,6 +77,14 @@ class CanSettings:
     """The AGV's node id in the frames' ids, 1..32; 0 (the default): the robot's id."""
     watchdog_ms: int = bounded(100, 10, 10_000, "ms")
     """No valid command from the agent for this long: the bridge commands zero force."""
+    watchdog_clock: str = "wall"
+    """What ``watchdog_ms`` (and the stale-sensor stop) is timed with. ``wall`` (the default,
+    and the only choice on a robot): this host's monotonic clock. ``bus``: the ticks the bus's
+    ``Sync`` frames open, ``T`` seconds each, for a lockstep simulation, where the bus master
+    opens no tick before it has every robot's command for the last one, so a silence is timed
+    by the ticks that went by without a command, not by how slowly the machine runs them
+    (``heft run --can`` in lockstep writes it). A bus whose master stops opens no tick, so
+    this clock stops too: never on a robot. Needs ``time_source = "sync"``."""
     time_source: str = "sync"
     """``sync``: a sample's tick is the one the bus's last ``Sync`` frame opened (CANopen
     SYNC); ``clock``: the tick this host's clock (synchronised by chrony or PTP) is in."""
@@ -103,6 +114,15 @@ class CanSettings:
         if self.time_source not in TIME_SOURCES:
             raise ConfigError(
                 f"{where}.time_source: expected sync or clock, got {self.time_source!r}"
+            )
+        if self.watchdog_clock not in WATCHDOG_CLOCKS:
+            raise ConfigError(
+                f"{where}.watchdog_clock: expected wall or bus, got {self.watchdog_clock!r}"
+            )
+        if self.watchdog_clock == "bus" and self.time_source != "sync":
+            raise ConfigError(
+                f'{where}.watchdog_clock: bus needs the bus\'s Sync frames (time_source = "sync"),'
+                f" got time_source = {self.time_source!r}"
             )
         if self.profile not in PROFILES:
             raise ConfigError(

@@ -28,6 +28,7 @@ import contextlib
 import errno
 import logging
 import logging.handlers
+import math
 import os
 import queue
 import socket
@@ -245,20 +246,38 @@ class BridgeNode:
                     self._bus_failed(err)
 
     # ------------------------------------------------------------------ the loop
+    def _clock(self, at: float) -> float:
+        """``at`` (``time.monotonic``) on the watchdog's clock
+        (:attr:`~bridge.config.CanSettings.watchdog_clock`): itself, or on the bus's clock the
+        start ``k T`` of the newest tick ``k`` the bus opened (0 before the first)."""
+        if self.config.can.watchdog_clock == "wall":
+            return at
+        tick = self.bridge.ticks.latest(0.0)
+        return 0.0 if tick is None else tick * self.bridge.period_s
+
     def _handle(self, item) -> None:
         bridge = self.bridge
         if isinstance(item, _Received):
-            for measurement in bridge.receive(item.message, item.at):
+            for measurement in bridge.receive(item.message, self._clock(item.at)):
                 self.port.send(measurement)
         elif isinstance(item, _BusFailed):
             if self.bus is not None:
                 self._bus_failed(item.error)
         elif isinstance(item, Command):
-            self._send(bridge.command(item, time.monotonic()))
+            self._send(bridge.command(item, self._clock(time.monotonic())))
         elif isinstance(item, Control):
             log.info("robot %d: the team was told to %s", bridge.robot, item.command)
         elif isinstance(item, Liveliness) and item.who == "agent":
             log.info("robot %d: agent %s", bridge.robot, "up" if item.alive else "gone")
+
+    def _due(self, now: float) -> float:
+        """When (``time.monotonic``) the watchdog has something to do, from ``now``: on the
+        bus's clock, now or never, since that clock moves only when a frame comes."""
+        at = self._clock(now)
+        due = self.bridge.next_check(at)
+        if self.config.can.watchdog_clock == "wall":
+            return due
+        return now if due <= at else math.inf
 
     def run(self) -> int:
         """Until stopped; 0."""
@@ -267,13 +286,15 @@ class BridgeNode:
             self.open()
         source = "the bus's Sync frames" if config.can.time_source == "sync" else "this clock"
         log.info(
-            "bridge of robot %d up: node %d on %s/%s, %s profile, watchdog %d ms, ticks from %s",
+            "bridge of robot %d up: node %d on %s/%s, %s profile, watchdog %d ms (%s clock),"
+            " ticks from %s",
             bridge.robot,
             bridge.node,
             config.can.interface,
             config.can.channel,
             config.can.profile,
             config.can.watchdog_ms,
+            config.can.watchdog_clock,
             source,
         )
         if bridge.admittance is not None:
@@ -295,11 +316,11 @@ class BridgeNode:
         try:
             while not self.stop.is_set():
                 now = time.monotonic()
-                wait = min(bridge.next_check(now), next_status, now + MAX_WAIT_S) - now
+                wait = min(self._due(now), next_status, now + MAX_WAIT_S) - now
                 for _, item in self.port.poll(max(wait, 0.0)):
                     self._handle(item)
                 now = time.monotonic()
-                self._send(bridge.watchdog(now))
+                self._send(bridge.watchdog(self._clock(now)))
                 self._try_reopen()
                 stopped = (bridge.tripped, bridge.sensor_stale)
                 if now >= next_status or stopped != stops:

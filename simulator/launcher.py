@@ -122,14 +122,14 @@ BRIDGE_WATCHDOG_MS = 200
 """The bridges' command watchdog in a real-time CAN run: 20 sensor periods of the paper at
 100 Hz, longer in proportion when the wall clock runs slower than real time
 (``run.real_time_factor``)."""
-LOCKSTEP_WATCHDOG_MS = 10_000
-"""The bridges' watchdog in a lockstep CAN run, the longest ``[can] watchdog_ms`` allows. There
-the plant waits for each agent's own command, so a trip keeps nothing safe, and it changes the
-run: a force bridge's ZERO frames, one per period per bus, load the plant and slow it further
-where the machine is slow, and a velocity bridge's stop forgets its admittance loop's state,
-which a run in one process does not. It should trip only when an agent is gone. In User-Mode
-Linux, at a run's ninth and tenth ticks, each of four velocity bridges heard no command for
-5.0-5.6 s, and a 5 s watchdog tripped on all four (``make hil``: two runs in eleven)."""
+LOCKSTEP_WATCHDOG_MS = BRIDGE_WATCHDOG_MS
+"""The bridges' watchdog in a lockstep CAN run, on the bus's clock (``watchdog_clock = "bus"``):
+20 ticks without a command. There the plant opens no tick before it has every robot's command
+for the last one, so only a robot the plant gave up on goes 20 ticks without one; on the wall
+clock a slow machine tripped it (in User-Mode Linux a velocity bridge heard no command for more
+than 10 s once in a run of ``make hil``), and a trip changes the run: a force bridge's ZERO frames
+load the plant, and a velocity bridge's stop forgets its admittance loop's state, which a run in
+one process does not."""
 PLANT_START_TIMEOUT_S = 300.0
 """How long the plant waits for every agent (and bridge) to come up. Ten processes that each
 import numpy took 40 s to come up in User-Mode Linux; an agent that dies on the way is seen
@@ -178,19 +178,25 @@ def bridge_watchdog_ms(scenario: Scenario, clock: str) -> int:
 
 
 def can_settings(
-    robot: int, can: CanLink, watchdog_ms: int = BRIDGE_WATCHDOG_MS, agvs: Agvs | None = None
+    robot: int,
+    can: CanLink,
+    watchdog_ms: int = BRIDGE_WATCHDOG_MS,
+    agvs: Agvs | None = None,
+    clock: str = "realtime",
 ) -> CanSettings:
-    """What robot ``robot``'s ``robot.toml`` says in its ``[can]`` table in a CAN run
-    (written by :func:`bridge.config.can_table`), which its AGV bridge (``heft bridge``)
-    reads beside the agent's part: its robot's bus, as the plant opens it; node id = robot
-    id; the tick from the plant's ``Sync`` frames; the scenario's AGV profile and admittance
-    loop (``[agvs]``, ``[agvs.admittance]``; none: force drives)."""
+    """What robot ``robot``'s ``robot.toml`` says in its ``[can]`` table in a CAN run on
+    ``clock`` (written by :func:`bridge.config.can_table`), which its AGV bridge (``heft
+    bridge``) reads beside the agent's part: its robot's bus, as the plant opens it; node id =
+    robot id; the tick from the plant's ``Sync`` frames, and in lockstep the watchdog on the
+    bus's clock (:data:`LOCKSTEP_WATCHDOG_MS`); the scenario's AGV profile and admittance loop
+    (``[agvs]``, ``[agvs.admittance]``; none: force drives)."""
     agvs = agvs or Agvs()
     return CanSettings(
         interface=can.interface,
         channel=can.channel_of(robot),
         node=robot,
         watchdog_ms=int(watchdog_ms),
+        watchdog_clock="bus" if clock == "lockstep" else "wall",
         time_source="sync",
         profile=agvs.profile,
         admittance=agvs.admittance,
@@ -561,7 +567,7 @@ def run_zenoh(
                             text = robot_toml(i, scenario, team, clock, router, faults)
                             if can is not None:
                                 watchdog_ms = bridge_watchdog_ms(scenario, clock)
-                                settings = can_settings(i, can, watchdog_ms, scenario.agvs)
+                                settings = can_settings(i, can, watchdog_ms, scenario.agvs, clock)
                                 text += can_table(settings)
                             config.write_text(text, encoding="utf-8")
                             if can is not None:

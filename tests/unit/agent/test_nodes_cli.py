@@ -324,6 +324,10 @@ def test_a_toml_string_reads_back_as_written(text: str) -> None:
 def test_the_launchers_can_table_reads_back_whatever_the_names() -> None:
     settings = can_settings(3, CanLink(interface="socketcan", channel='can\\"{robot}'), 50)
     assert settings.channel == 'can\\"3' and settings.node == 3 and settings.watchdog_ms == 50
+    assert settings.watchdog_clock == "wall"
+    lockstep = can_settings(3, CanLink(), 200, clock="lockstep")
+    assert lockstep.watchdog_clock == "bus" and lockstep.time_source == "sync"
+    lockstep.validate("can")
     table = tomllib.loads(can_table(settings))["can"]
     assert from_table(CanSettings, table, "can") == settings
     loop = AdmittanceSettings(mass=2.5, damping=7.25, tare_samples=3)

@@ -371,6 +371,8 @@ def test_the_config_is_the_robots_toml_with_a_can_table(tmp_path) -> None:
         ("", "can: missing"),
         ('[can]\ntime_source = "gps"', "can.time_source"),
         ("[can]\nwatchdog_ms = 1", "can.watchdog_ms"),
+        ('[can]\nwatchdog_clock = "sim"', "can.watchdog_clock: expected wall or bus"),
+        ('[can]\nwatchdog_clock = "bus"\ntime_source = "clock"', "bus needs the bus's Sync"),
         ("[can]\nnode = 33", "can.node"),
         ('[can]\ninterface = "socket can"', "can.interface"),
         ("[can]\nbaud = 5", "can.baud: unknown key"),
@@ -462,6 +464,33 @@ def test_the_bridge_loop_on_a_virtual_bus(tmp_path) -> None:
     while (message := driver.recv(0.2)) is not None:
         last = CODEC.decode(message)
     assert last == ForceCommand(2, 29 % 16, (0.0, 0.0), False)
+    driver.shutdown()
+
+
+def test_on_the_bus_clock_only_ticks_without_a_command_are_a_silence(tmp_path) -> None:
+    """``watchdog_clock = "bus"`` (a lockstep simulation): commands come 0.3 s of wall time
+    apart, three times the 100 ms watchdog, each for the tick the bus opened: no zero force.
+    Then the bus opens ticks that get no command: zero force once ten of them (100 ms at
+    10 ms) have gone by since the last command's, and not before."""
+    table = '[can]\ninterface = "virtual"\nchannel = "t-bus"\nwatchdog_clock = "bus"\n'
+    with bridge_on_virtual_bus(tmp_path, table, "t-bus") as (port, driver):
+        for tick in range(5):
+            for frame in tick_frames(tick):
+                driver.send(CODEC.encode(frame))
+            time.sleep(0.3)
+            answer(port, tick, (1.0, 0.0))
+            reply = CODEC.decode(driver.recv(1.0))
+            assert reply == ForceCommand(2, tick, (1.0, 0.0), True)
+        assert not any(r.watchdog for r in port.reports if isinstance(r, BridgeStatus))
+        zero_at = None
+        for tick in range(5, 20):
+            for frame in tick_frames(tick):
+                driver.send(CODEC.encode(frame))
+            if (message := driver.recv(0.05)) is not None:
+                assert CODEC.decode(message) == ForceCommand(2, tick % 16, (0.0, 0.0), False)
+                zero_at = tick if zero_at is None else zero_at
+        assert zero_at in (14, 15)  # (k - 4) T > 100 ms, k = 14 as it rounds
+        assert any(r.watchdog for r in port.reports if isinstance(r, BridgeStatus))
     driver.shutdown()
 
 
