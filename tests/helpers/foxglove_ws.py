@@ -1,14 +1,22 @@
 """A minimal Foxglove WebSocket client, as Foxglove itself speaks the protocol to a live source:
 the server's ``serverInfo`` and ``advertise`` (channels: topic, encoding, schema), the
 client's ``subscribe``, and the server's binary ``messageData`` (op 1, the subscription's id,
-the message's log time in ns, its bytes)."""
+the message's log time in ns, its bytes).
+
+A subscription the server answers with ``Unknown channel ID: N`` for a channel it advertised,
+and has not taken back, is sent again (at most :data:`RESUBSCRIBE` times): the SDK's server
+(0.30) sends a channel's ``advertise`` before it adds the channel to the client's own map, so a
+client that subscribes at once, while the channel is new, can be refused (once on a fresh
+clone: a channel created while the client was connected, never subscribed)."""
 
 from __future__ import annotations
 
 import base64
 import json
+import re
 import struct
 import time
+from collections import Counter
 from dataclasses import dataclass
 
 from websockets.sync.client import ClientConnection, connect
@@ -17,6 +25,14 @@ SUBPROTOCOL = "foxglove.sdk.v1"
 """The subprotocol of the Foxglove WebSocket protocol the Foxglove SDK's server speaks."""
 MESSAGE_DATA = 1
 _MESSAGE_DATA = struct.Struct("<BIQ")
+RESUBSCRIBE = 10
+"""How many times a subscription refused for an advertised channel is sent again (each
+channel)."""
+RESUBSCRIBE_WAIT_S = 0.02
+"""How long the first subscription sent again waits, and each next one twice as long (at
+most 1 s): the server refuses it for as long as its thread that advertised the channel is
+descheduled."""
+UNKNOWN_CHANNEL = re.compile(r"Unknown channel ID: (\d+)")
 WAIT_S = 20.0
 """The longest a test waits for what it expects (it never measures time)."""
 
@@ -57,6 +73,8 @@ class FoxgloveClient:
         assert self.server_info["op"] == "serverInfo", self.server_info
         self._subscriptions: dict[int, int] = {}
         """Subscription id → channel id."""
+        self.resubscribed: Counter[int] = Counter()
+        """Channel id → subscriptions to it sent again (see the module docstring)."""
 
     def _handle(self, frame: str | bytes) -> Received | None:
         if isinstance(frame, bytes):
@@ -80,7 +98,20 @@ class FoxgloveClient:
         elif message["op"] == "unadvertise":
             for channel in message["channelIds"]:
                 self.channels.pop(channel, None)
+        elif message["op"] == "status" and (unknown := UNKNOWN_CHANNEL.search(message["message"])):
+            self._subscribe_again(int(unknown.group(1)))
         return None
+
+    def _subscribe_again(self, channel: int) -> None:
+        """The server refused a subscription to ``channel``: sent again if it advertised it."""
+        mine = [s for s, c in self._subscriptions.items() if c == channel]
+        assert mine and channel in self.channels, f"channel {channel} is not advertised"
+        refused = self.resubscribed[channel]
+        assert refused < RESUBSCRIBE, f"channel {channel} refused {RESUBSCRIBE + 1} times"
+        self.resubscribed[channel] += 1
+        time.sleep(min(RESUBSCRIBE_WAIT_S * 2**refused, 1.0))  # the server's thread, descheduled
+        subscriptions = [{"id": mine[0], "channelId": channel}]
+        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
 
     def advertised(self, topics: set[str]) -> dict[str, Advertised]:
         """Wait until every topic of ``topics`` is advertised; every advertised channel by
