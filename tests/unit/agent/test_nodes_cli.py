@@ -520,6 +520,16 @@ def test_run_with_bad_faults(transport: str, options: list[str], capsys) -> None
     assert len(err.strip().splitlines()) == 1 and out == ""
 
 
+@pytest.mark.parametrize("options", [["--delay-ms", "5"], ["--clock", "realtime"]])
+def test_run_in_one_process_refuses_what_only_processes_do(options: list[str], capsys) -> None:
+    """The wall clock and a network's delay are the processes' (``--transport zenoh``): in one
+    process they would be silently ignored."""
+    code = main(["run", str(PAPER), "--quiet", *options])
+    out, err = capsys.readouterr()
+    assert_usage_error(code, err, options[0], "--transport zenoh")
+    assert len(err.strip().splitlines()) == 1 and out == ""
+
+
 def test_run_with_drop_1_5_without_quiet(capsys) -> None:
     code = main(["run", str(PAPER), "--drop", "1.5"])
     _, err = capsys.readouterr()
