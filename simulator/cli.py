@@ -285,7 +285,7 @@ def _faults(args: argparse.Namespace, scenario: Scenario) -> FaultSettings:
         raise UsageError(f"--delay-ms: expected a number in [0, 10000], got {args.delay_ms:g}")
     if args.delay_ms and args.transport != "zenoh":
         raise UsageError("--delay-ms needs --transport zenoh (in one process time is simulated)")
-    if args.clock == "realtime" and args.transport != "zenoh":
+    if args.transport == "inprocess" and args.clock == "realtime":
         raise UsageError(
             "--clock realtime needs --transport zenoh (in one process the robots take turns:"
             " lockstep)"

@@ -173,3 +173,20 @@ def test_a_lost_agent_halts_the_team(tmp_path: Path, fault: str) -> None:
     assert results["converged"] is False and results["reason"] == "robot(s) [3] lost"
     time.sleep(0.5)
     assert in_session(launcher.pid) == []
+
+
+def test_heft_watch_with_no_plant_says_so(capsys) -> None:
+    """``heft watch`` shares ``heft run``'s way from its options to its run: with a router and
+    no team on it, it gives up after ``--start-timeout`` with a verdict, exit status 1."""
+    from agent.platform.heft import main
+
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    with open_session(ZenohSettings(mode="peer", connect=(), listen=(listen,))):
+        code = main(
+            ["watch", str(PAPER), "--team", "nobody", "--connect", listen]
+            + ["--start-timeout", "0.5", "--quiet"]
+        )
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert "Traceback" not in err
+    assert "nothing heard of the plant within 0.5 s" in err.strip().splitlines()[-1]
