@@ -28,9 +28,9 @@ def test_a_realtime_run_over_zenoh_shrugs_off_forged_messages(monkeypatch) -> No
     """A second Zenoh client on the run's router forges messages on every key of the team —
     thousands on each, as in the probes that once crashed every agent — while the paper's
     scenario runs on the wall clock: the run converges within the usual bounds. At half of real
-    time (``run.real_time_factor`` 0.5, 20 ms a tick): the paper's estimators wait for a second
-    of commands all on time to settle Step 5 (docs/estimator.md), and on a fresh clone, at full
-    pace, one run's push carried the load 5.5 m before they did."""
+    time (``run.real_time_factor`` 0.5, 20 ms a tick), so that fewer commands come late: the
+    paper's estimators' Step 5 can wait long in real time (docs/estimator.md), and on a fresh
+    clone, at full pace, one run's load travelled 5.5 m, off its floor."""
     port = launcher.free_port()
     monkeypatch.setattr(launcher, "free_port", lambda: port)
     scenario = load_scenario(PAPER)
