@@ -236,7 +236,9 @@ CANNOT_BREAK_AWAY = "cannot break the load away"
 """The verdict of a team whose every robot found the load held by the floor."""
 MASS_NOT_DETERMINED = "mass not determined"
 """The verdict of a team done without a mass it could publish: its ``m̂`` stopped getting
-surer short of :data:`~agent.algorithm.robust.pipeline.PUBLISHED_FROM` of itself."""
+surer short of :data:`~agent.algorithm.robust.pipeline.PUBLISHED_FROM` of itself, or the load
+swung under Step 7's push (:data:`~agent.algorithm.robust.pipeline.SWUNG_TURN`: then no COM is
+published either)."""
 
 
 @dataclass(frozen=True)
@@ -261,11 +263,18 @@ def mass_verdict(verdict: Verdict, estimates: Mapping[int, Estimates], t_s: floa
     unknown = [robot for robot, est in sorted(estimates.items()) if est.mass is None]
     if verdict.reason or not unknown:
         return verdict
+    swung = [robot for robot in unknown if estimates[robot].contact_to_com is None]
+    com = (
+        f"; nor is the COM by robot(s) {swung}: the load turned under the push, so their COM was"
+        " off"
+        if swung
+        else ""
+    )
     return Verdict(
         MASS_NOT_DETERMINED,
         f"the team was done at t = {t_s:.2f} s simulated, but robot(s) {unknown} know the mass"
         f" only to worse than {100 * PUBLISHED_FROM:g} %, or measured it while the load turned"
-        " under the push (a COM known too roughly): no mass is published",
+        f" under the push (a COM known too roughly): no mass is published{com}",
     )
 
 

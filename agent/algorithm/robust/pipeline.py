@@ -67,13 +67,18 @@ SWUNG_TURN = 0.3
 """rad: a Step 7 stage in which the load turned back by more than this from its furthest turn
 either way (:attr:`~agent.algorithm.robust.hold_fit.HoldFit.swung`) swung under the push:
 Step 5's ``ẑ_C`` was too far off for the push to act through the COM, and the mass fit, whose
-model is a load that translates, is not backed: no ``m̂`` nor ``μ̂`` is published from it.
+model is a load that translates, is not backed: no ``m̂`` nor ``μ̂`` is published from it, and
+no ``ẑ_C`` either, nor what is made of it (``p_C − p_Ci``, Step 6's ``ṗ_C``): the swing is the
+evidence that it is wrong (generated load 47, seeds as below: its ``p_C − p_Ci`` 396 mm off on
+every robot, outside every published 95 % ellipse, whose standard deviations were 105–108 mm).
 On the noise benchmark's floor (``heft bench noise --generated 40 --coulomb-range 0.005
 0.03``, 2026-11-28) generated load 47 swung by 0.66 rad (Step 5 had left its ``ẑ_C`` 27 cm
 off; its ``m̂`` was 56 % off behind a published 95 % interval of about ±28 %); generated load
 11, the next, by 0.12 rad, its ``m̂`` 1.5 % off within its interval. A turn one way is no
 swing: without noise, generated load 1 (``heft bench generated``) began the stage turning at
 0.19 rad/s, and turned 0.18 rad in it."""
+SWUNG_HIDES = ("com_offset", "com_velocity", "contact_to_com", "contact_to_com_cov")
+"""The estimates made of ``ẑ_C``, not published after a swing (:data:`SWUNG_TURN`)."""
 PUBLISHED_FROM = 0.25
 """The relative standard deviation at most which ``m̂`` and ``Ĵ`` are published: a fit's
 first instants say nothing yet (Step 7's first mass is typically 11 ± 11 kg on the paper's
@@ -506,8 +511,8 @@ class RobustPipeline(EstimationPipeline):
     def estimates(self, robot: int, schedule) -> Estimates:
         """The estimates (:meth:`EstimationPipeline.estimates`), but ``m̂`` and ``Ĵ`` only once
         known to :data:`PUBLISHED_FROM` of themselves: not yet, rather than a number that
-        means nothing; and neither ``m̂`` nor ``μ̂`` from a Step 7 stage in which the load
-        swung (:data:`SWUNG_TURN`)."""
+        means nothing; and neither ``m̂``, ``μ̂`` nor the COM (:data:`SWUNG_HIDES`) once a
+        Step 7 stage has swung the load (:data:`SWUNG_TURN`)."""
         found = super().estimates(robot, schedule)
         hidden = {}
         for key in ("mass", "moment"):
@@ -517,6 +522,7 @@ class RobustPipeline(EstimationPipeline):
         if self.hold is not None and self.hold.swung > SWUNG_TURN:
             for key in ("mass", "coulomb"):
                 hidden[key] = hidden[key + "_std"] = None
+            hidden.update(dict.fromkeys(SWUNG_HIDES))
         return dataclasses.replace(found, **hidden) if hidden else found
 
     def fit_shares(self) -> FitShares:
