@@ -8,6 +8,8 @@ them gives the same figures under the same names:
 - :func:`final_instant`: the instant a run's estimates are evaluated at;
 - :func:`robot_errors`: one robot's errors, :data:`ERROR_KEYS`, in SI units;
 - :func:`team_errors`: the worst of each over the team;
+- :func:`relative_position_split`: the team's ``z_ij`` errors split into the turn common to
+  every edge, each edge's own turn and its length;
 - :func:`scalar_interval`, :func:`planar_interval` and :func:`edges_interval`: a published
   uncertainty's 95 % interval and whether the truth lies inside it.
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 from agent.platform.geometry import Vec2, largest_std
@@ -132,6 +135,49 @@ def team_errors(
     estimate (the worst is then unknown)."""
     rows = [robot_errors(estimates.get(i), truth, graph[i]) for i in graph]
     return {key: _worst(row[key] for row in rows) for key in ERROR_KEYS}
+
+
+@dataclass(frozen=True)
+class RelativePositionSplit:
+    """The team's ``ẑ_ij`` errors split by what they are (:func:`relative_position_split`)."""
+
+    common_turn: float
+    """rad: the mean over every published edge of the angle from ``z_ij`` to ``ẑ_ij``: the
+    turn that all of them share (a team's rotation misjudged), signed."""
+    worst_length: float
+    """m: the largest ``|‖ẑ_ij‖ − ‖z_ij‖|``."""
+    worst_own: float
+    """m: the largest ``‖ẑ_ij − z_ij‖`` once ``ẑ_ij`` is turned back by :attr:`common_turn`:
+    what is left of each edge's error without the shared turn."""
+
+
+def relative_position_split(
+    estimates: Mapping[int, Estimates], truth: Truth, graph: Mapping[int, Iterable[int]]
+) -> RelativePositionSplit | None:
+    """Every robot's published ``ẑ_ij`` over its neighbours in ``graph``, against the truth:
+    their angles' mean (each ``atan2`` of ``ẑ_ij`` less that of ``z_ij``, wrapped), the worst
+    error of their lengths, and the worst error left with that mean turned out; ``None`` if
+    some robot lacks an edge."""
+    rows = []
+    for i, neighbours in graph.items():
+        est = estimates.get(i)
+        for j in neighbours:
+            found = None if est is None else est.relative_positions.get(j)
+            if found is None or not all(map(math.isfinite, found)):
+                return None
+            rows.append((found, true_relative(truth, i, j)))
+    if not rows:
+        return None
+    angles = [
+        math.remainder(math.atan2(f[1], f[0]) - math.atan2(t[1], t[0]), math.tau) for f, t in rows
+    ]
+    common = math.fsum(angles) / len(angles)
+    c, s = math.cos(-common), math.sin(-common)
+    return RelativePositionSplit(
+        common_turn=common,
+        worst_length=max(abs(math.hypot(*f) - math.hypot(*t)) for f, t in rows),
+        worst_own=max(math.dist((c * f[0] - s * f[1], s * f[0] + c * f[1]), t) for f, t in rows),
+    )
 
 
 # ------------------------------------------------------------------------------ intervals

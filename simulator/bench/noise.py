@@ -32,8 +32,13 @@ On a floor (:attr:`NoiseSettings.floor`, ``--coulomb`` or ``--coulomb-range``: e
 ``μ`` and its supports as :mod:`simulator.bench.floor` gives them) the robots' friction
 estimates are judged too (:data:`FRICTION`): the floor's Coulomb torque on a spin
 ``τ_c = μ m g c`` relative to the truth's, and ``μ`` absolute, with the share of their 95 %
-intervals that hold the truth. The centralized fit models no friction: beside them it gives
-nothing.
+intervals that hold the truth. The centralized fit fits the floor's friction too, but its own
+friction parameters are not judged: beside the robots' it gives nothing.
+
+``z_ij``'s errors are also split (:func:`~agent.platform.evaluation.relative_position_split`),
+the robust estimators' beside the baseline's: the turn that every edge's estimate shares (the
+team's rotation misjudged), the worst error of an edge's length, and the worst error left once
+that common turn is taken out.
 
 A sweep (``heft bench sweep``, :func:`run_sweep`) repeats this over ``σ_v`` with
 ``σ_f = 50 σ_v`` and plots the medians against ``σ_v``; it checks no goal. Another
@@ -57,7 +62,14 @@ import numpy as np
 from agent.algorithm.robust.uncertainty import FitShares
 from agent.algorithm.tuning import Estimators
 from agent.platform.cli_helpers import PROG
-from agent.platform.evaluation import ERROR_KEYS, scalar_interval, team_errors, true_relative
+from agent.platform.evaluation import (
+    ERROR_KEYS,
+    RelativePositionSplit,
+    relative_position_split,
+    scalar_interval,
+    team_errors,
+    true_relative,
+)
 from agent.platform.goals import Goal, Sense
 from agent.platform.protocol import Estimates, Measurement, Phase, Truth
 from simulator.bench.floor import FloorSettings, on_floor
@@ -246,6 +258,10 @@ class SeedResult:
     dropped_cells: int = 0
     """The cells of the load's area it did not rest on, the floor pulling there
     (:func:`~simulator.bench.floor.on_floor`)."""
+    split: dict[str, RelativePositionSplit | None] = field(default_factory=dict)
+    """The robust estimators' and the baseline's ``z_ij`` errors split
+    (:func:`~agent.platform.evaluation.relative_position_split`), by ``robust`` and
+    ``baseline``; ``None`` where some edge has no estimate."""
 
 
 def for_generated(settings: NoiseSettings) -> NoiseSettings:
@@ -326,26 +342,35 @@ def baseline_errors(outcome: RunOutcome, found: BaselineFit | None) -> dict[str,
     if found is None:
         return dict.fromkeys((*ERROR_KEYS, *FRICTION_KEYS))
     truth = outcome.final.truth
+    true = truth_friction(truth)
+    errors = team_errors(fitted_estimates(outcome, found), truth, _graph(outcome))
+    for key, name in FRICTION_KEYS.items():
+        value, exact = getattr(found, name), true[name]
+        errors[key] = None if value is None or exact is None else abs(value - exact)
+    return errors
+
+
+def _graph(outcome: RunOutcome) -> dict[int, tuple[int, ...]]:
     scenario = outcome.scenario
-    graph = {i: scenario.neighbours(i) for i in range(1, scenario.n + 1)}
-    fitted = {
+    return {i: tuple(scenario.neighbours(i)) for i in range(1, scenario.n + 1)}
+
+
+def fitted_estimates(outcome: RunOutcome, found: BaselineFit) -> dict[int, Estimates]:
+    """The batch fit ``found`` as each robot's estimates at the run's final instant: its m,
+    J, ``contact_to_com`` and ``z_ij``."""
+    tick = outcome.final.truth.tick
+    return {
         i: Estimates(
             robot=i,
-            tick=truth.tick,
+            tick=tick,
             phase=Phase.DONE,
             mass=found.mass,
             moment=found.moment,
             contact_to_com=found.contact_to_com[i - 1],
             relative_positions={j: found.relative_position(i, j) for j in neighbours},
         )
-        for i, neighbours in graph.items()
+        for i, neighbours in _graph(outcome).items()
     }
-    true = truth_friction(truth)
-    errors = team_errors(fitted, truth, graph)
-    for key, name in FRICTION_KEYS.items():
-        value, exact = getattr(found, name), true[name]
-        errors[key] = None if value is None or exact is None else abs(value - exact)
-    return errors
 
 
 def baseline_friction(found: BaselineFit | None) -> dict[str, float | None]:
@@ -482,6 +507,13 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
                 inside[key].append(bool(row[name][1]))
     inside.update(friction_inside(robust))
     truth = robust.final.truth
+    graph = _graph(robust)
+    split = {
+        "robust": relative_position_split(robust.final.estimates, truth, graph),
+        "baseline": None
+        if reference is None
+        else relative_position_split(fitted_estimates(robust, reference), truth, graph),
+    }
     return SeedResult(
         seed=seed,
         robust=friction_errors(errors(robust), truth),
@@ -498,6 +530,7 @@ def run_seed(scenario: Scenario, settings: NoiseSettings, seed: int) -> SeedResu
         intervals=dict(final),
         coulomb=truth.ground_coulomb,
         dropped_cells=dropped,
+        split=split,
     )
 
 
@@ -601,6 +634,7 @@ def format_noise_report(
         f"heft bench noise: {label}, {seeds}, {settings.noise_text} ({wall_s:.0f} s wall)",
         "",
         *_median_table(results),
+        *_split_lines(results),
     ]
     done = [r for r in results if r.robust_done]
     if 0 < len(done) < n:
@@ -643,6 +677,30 @@ def _median_table(results: Sequence[SeedResult]) -> list[str]:
             f" {'-' if inside is None else f'{100 * inside:.0f} % of {published}':>12}"
         )
     return lines
+
+
+def _split_lines(results: Sequence[SeedResult]) -> list[str]:
+    """``z_ij``'s errors split (:func:`~agent.platform.evaluation.relative_position_split`):
+    the medians over the runs where both the robust estimators and the baseline have every
+    edge, of the turn common to the edges, the worst length and the worst error without the
+    common turn; nothing without such runs."""
+    both = [r for r in results if r.split.get("robust") and r.split.get("baseline")]
+    if not both:
+        return []
+
+    def med(which: str, name: str, scale: float) -> str:
+        values = [scale * abs(getattr(r.split[which], name)) for r in both]
+        return f"{statistics.median(values):.3g}"
+
+    cells = [
+        f"{label} {med('robust', name, scale)} / {med('baseline', name, scale)} {unit}"
+        for label, name, scale, unit in (
+            ("common turn", "common_turn", 1000.0, "mrad"),
+            ("worst length", "worst_length", 1000.0, "mm"),
+            ("worst without the common turn", "worst_own", 1000.0, "mm"),
+        )
+    ]
+    return [f"z_ij split, robust / baseline (medians over {len(both)} runs): " + "; ".join(cells)]
 
 
 def _floor_lines(results: Sequence[SeedResult]) -> list[str]:

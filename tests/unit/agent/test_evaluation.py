@@ -18,6 +18,7 @@ from agent.platform.evaluation import (
     edges_interval,
     final_instant,
     planar_interval,
+    relative_position_split,
     robot_errors,
     scalar_interval,
     team_errors,
@@ -184,3 +185,40 @@ def test_a_standard_deviation_that_cannot_be_one_gives_no_interval(std) -> None:
 def test_a_covariance_that_cannot_be_one_gives_no_interval(cov) -> None:
     assert covariance(cov) is None
     assert planar_interval((1.0, 0.0), cov, (1.0, 0.0)) == (None, None)
+
+
+def _turned(v, angle: float):
+    c, s = math.cos(angle), math.sin(angle)
+    return (c * v[0] - s * v[1], s * v[0] + c * v[1])
+
+
+def test_the_split_of_the_relative_positions_errors() -> None:
+    """Every ``ẑ_ij`` turned by 2 mrad and one lengthened by 3 mm: the common turn is the
+    2 mrad, the worst length the 3 mm, and once the turn is taken out only the 3 mm is left;
+    an edge turned alone is its own error; a missing edge leaves no split."""
+    exact = {r: estimates(r) for r in GRAPH}
+    turned = {
+        r: dataclasses.replace(
+            e, relative_positions={j: _turned(z, 2e-3) for j, z in e.relative_positions.items()}
+        )
+        for r, e in exact.items()
+    }
+    z = turned[2].relative_positions[3]
+    longer = 1.0 + 3e-3 / math.hypot(*z)
+    turned[2] = dataclasses.replace(
+        turned[2],
+        relative_positions={**turned[2].relative_positions, 3: (longer * z[0], longer * z[1])},
+    )
+    split = relative_position_split(turned, TRUTH, GRAPH)
+    assert split.common_turn == pytest.approx(2e-3, rel=1e-9)
+    assert split.worst_length == pytest.approx(3e-3, rel=1e-6)
+    assert split.worst_own == pytest.approx(3e-3, rel=1e-6)
+    # one edge of four turned by 8 mrad: the common turn is 2 mrad, the edge keeps 6 mrad of it
+    alone = dict(exact)
+    alone[1] = dataclasses.replace(exact[1], relative_positions={2: _turned((-2.0, 0.0), 8e-3)})
+    split = relative_position_split(alone, TRUTH, GRAPH)
+    assert split.common_turn == pytest.approx(2e-3, rel=1e-9)
+    assert split.worst_length == pytest.approx(0.0, abs=1e-12)
+    assert split.worst_own == pytest.approx(2.0 * 6e-3, rel=1e-4)
+    missing = {**exact, 3: dataclasses.replace(exact[3], relative_positions={})}
+    assert relative_position_split(missing, TRUTH, GRAPH) is None
