@@ -7,6 +7,7 @@ import dataclasses
 
 import pytest
 
+from agent.platform.evaluation import RelativePositionSplit
 from agent.platform.goals import exit_status, judge
 from agent.platform.heft import main
 from simulator.bench import changes, noise
@@ -230,3 +231,24 @@ def test_the_commands_default_seeds_are_the_settings_default() -> None:
     from simulator.bench.cli import NOISE_SEEDS
 
     assert NOISE_SEEDS == NoiseSettings().seeds
+
+
+def test_the_report_splits_the_relative_positions_errors() -> None:
+    """The ``z_ij`` split's medians, robust / baseline, over the runs where both have one (a
+    run without the baseline's is left out); no line when no run has both."""
+
+    def split(turn: float, length: float, own: float) -> RelativePositionSplit:
+        return RelativePositionSplit(common_turn=turn, worst_length=length, worst_own=own)
+
+    runs = [seed_result(s, 1.2) for s in range(4)]
+    for r, turn in zip(runs, (-1e-3, 2e-3, 3e-3, 9e-3)):
+        r.split = {"robust": split(turn, 2e-3, 1e-3), "baseline": split(5e-4, 1e-3, 5e-4)}
+    runs[3].split["baseline"] = None  # its fit failed: left out
+    report = format_noise_report(runs, NoiseSettings(), "x", 1.0)
+    line = next(line for line in report.splitlines() if line.startswith("z_ij split"))
+    assert line == (
+        "z_ij split, robust / baseline (medians over 3 runs): common turn 2 / 0.5 mrad; worst"
+        " length 2 / 1 mm; worst without the common turn 1 / 0.5 mm"
+    )
+    bare = [seed_result(s, 1.2) for s in range(4)]
+    assert "z_ij split" not in format_noise_report(bare, NoiseSettings(), "x", 1.0)
