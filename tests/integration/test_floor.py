@@ -19,7 +19,7 @@ from simulator.plant import Plant
 from simulator.results import floor_check, format_table
 from simulator.scenario import load_scenario
 from tests.helpers.accuracy import assert_same_estimates
-from tests.helpers.paths import PAPER
+from tests.helpers.paths import PAPER, paper_at_half_pace
 
 
 @pytest.fixture(scope="module")
@@ -68,13 +68,9 @@ def test_the_floor_over_zenoh_is_the_in_process_runs(paper_run, clock: str) -> N
     in-process run's (in lockstep exactly; in real time to 1 cm, 0.01 m/s and 0.01 rad/s when
     every robot began each step as many ticks after it did there: the real-time run starts a
     tick or so late, and one in which a late command moved one step's start against the others
-    is its own); and the recorded samples (the plots' points) span the run. On the wall clock
-    at half pace (``run.real_time_factor`` 0.5, 20 ms a tick), as the forged-messages test runs:
-    the paper's estimators' Step 5 can wait long when commands come late (docs/estimator.md)."""
-    scenario = load_scenario(PAPER)
-    if clock == "realtime":
-        run = dataclasses.replace(scenario.run, real_time_factor=0.5)
-        scenario = dataclasses.replace(scenario, run=run)
+    is its own); and the recorded samples (the plots' points) span the run. In real time at
+    half pace (:func:`~tests.helpers.paths.paper_at_half_pace`)."""
+    scenario = paper_at_half_pace() if clock == "realtime" else load_scenario(PAPER)
     there = run_zenoh(scenario, clock=clock, log_stream=io.StringIO())
     assert there.converged
     here, floor = floor_check(paper_run), floor_check(there)

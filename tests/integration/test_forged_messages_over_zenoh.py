@@ -5,7 +5,6 @@ forgery counted. (The same messages on an in-process bus: tests/unit/agent/test_
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import random
 import threading
@@ -17,26 +16,20 @@ import pytest
 from agent.platform.protocol import Keys
 from agent.platform.zenoh_session import ZenohSettings, open_session
 from simulator import launcher
-from simulator.scenario import load_scenario
 from tests.helpers.accuracy import assert_within
 from tests.helpers.forged import KEYS, forged_messages
-from tests.helpers.paths import PAPER
+from tests.helpers.paths import paper_at_half_pace
 
 
 @pytest.mark.slow
 def test_a_realtime_run_over_zenoh_shrugs_off_forged_messages(monkeypatch) -> None:
     """A second Zenoh client on the run's router forges messages on every key of the team —
     thousands on each, as in the probes that once crashed every agent — while the paper's
-    scenario runs on the wall clock: the run converges within the usual bounds. At half of real
-    time (``run.real_time_factor`` 0.5, 20 ms a tick), so that fewer commands come late: the
-    paper's estimators' Step 5 can wait long in real time (docs/estimator.md), and on a fresh
-    clone, at full pace, one run's load travelled 5.5 m, off its floor."""
+    scenario runs on the wall clock, at half pace (:func:`~tests.helpers.paths.
+    paper_at_half_pace`): the run converges within the usual bounds."""
     port = launcher.free_port()
     monkeypatch.setattr(launcher, "free_port", lambda: port)
-    scenario = load_scenario(PAPER)
-    scenario = dataclasses.replace(
-        scenario, run=dataclasses.replace(scenario.run, real_time_factor=0.5)
-    )
+    scenario = paper_at_half_pace()
     keys = Keys(launcher._team_name(scenario))
     assert keys.team == "paper"  # the scenario's name, as a deployed team's
     stop = threading.Event()
