@@ -130,8 +130,8 @@ def _add_accuracy(benchmarks: argparse._SubParsersAction) -> None:
         "--repeat",
         metavar="N",
         type=int,
-        default=3,
-        help="number of runs with each family (default: 3), in [1, 1000]",
+        default=9,
+        help="number of runs with each family (default: 9), in [1, 1000]",
     )
     parser.set_defaults(handler=cmd_accuracy)
 

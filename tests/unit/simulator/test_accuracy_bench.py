@@ -50,6 +50,22 @@ def test_the_ratio_is_robust_over_paper_wall_time_per_simulated_second(report) -
     assert "accuracy, paper estimators" in text and "paper steps" in text
 
 
+def test_the_ratio_is_the_median_of_the_rounds_printed_with_their_range(report) -> None:
+    (robust,), (paper,) = report.runs[Estimators.ROBUST], report.runs[Estimators.PAPER]
+    per_s = paper.wall_s / paper.sim_time_s
+    rounds = [  # the robust run slowed to these ratios, the paper's run as it was
+        dataclasses.replace(robust, wall_s=ratio * per_s * robust.sim_time_s)
+        for ratio in (1.3, 1.9, 1.45)
+    ]
+    slowed = dataclasses.replace(
+        report, runs={Estimators.ROBUST: rounds, Estimators.PAPER: [paper] * 3}
+    )
+    assert slowed.round_ratios == pytest.approx([1.3, 1.9, 1.45], rel=1e-12)
+    assert slowed.speed_ratio == pytest.approx(1.45, rel=1e-12)
+    text = accuracy.format_report(slowed)
+    assert "1.45 (median of the 3 rounds' ratios, 1.30 to 1.90)" in text
+
+
 def test_the_families_take_turns(monkeypatch, report) -> None:
     ran = []
 
