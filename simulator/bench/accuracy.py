@@ -34,9 +34,10 @@ from simulator.results import errors, step_times, team_phases
 from simulator.scenario import Scenario
 
 DEFAULT_REPEAT = 9
-"""Runs with each family. The ratio of one round varies with what else the machine does: on
-one 2-core machine, five runs of ``heft bench accuracy -n 3`` gave medians of 1.32 to 1.69
-(the goal's verdict flipping between them), three of ``-n 9`` 1.40 to 1.49 (2026-11-29)."""
+"""Runs with each family. One round's ratio varies by about ±20 % from round to round, even with
+nothing else running: on one 2-core machine, five runs of ``heft bench accuracy -n 3`` gave
+medians of 1.32 to 1.69 (the goal's verdict flipping between them), three of ``-n 9`` 1.40 to
+1.49 (2026-11-29)."""
 FAMILIES = (Estimators.ROBUST, Estimators.PAPER)
 """The families of estimators compared, each run on the same load."""
 ERROR_ROWS = (
