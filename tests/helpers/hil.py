@@ -41,6 +41,9 @@ is being timed, is measured again rather than judged (:meth:`DriverRig.stall_ms`
 Linux guest was seen to stall for 600 ms)."""
 AGENT_SILENT = "no command for"
 """What the bridge logs when its agent's watchdog trips (:meth:`bridge.bridge.Bridge.watchdog`)."""
+SENSOR_STALE = "sensor stale"
+"""What the bridge of the velocity profile logs when its force/torque sensor goes stale
+(:meth:`bridge.bridge.Bridge.watchdog`)."""
 LATE_TRIP_MS = PERIOD * 1e3 / 2
 """ms: an episode in which the bridge, by its own log, tripped a stop more than this after its
 deadline is measured again rather than judged: the machine held the bridge's loop when it was
@@ -343,11 +346,20 @@ class DriverRig:
             assert time.monotonic() < deadline, f"the bridge's log does not say {told!r}"
             time.sleep(0.05)
 
+    def told_before(self, first: str, then: str, since: int) -> bool:
+        """Whether the bridge's log, from its byte ``since`` on, has a line with ``first``
+        before the first line with ``then``."""
+        log = self.log.read_bytes()[since:].decode(errors="replace")
+        return first in log.split(then, 1)[0]
+
     def stop_when_killed(self, stopped, what: str, ready=None) -> tuple:
         """``kill -9`` the echo agent and time the stop, until an episode in which the host
         stood the machine still for no more than :data:`STALL_MS` and the bridge, by its own
         log, tripped no more than :data:`LATE_TRIP_MS` after its deadline (at most
-        :data:`ATTEMPTS`):
+        :data:`ATTEMPTS`), and whose first stop is the agent's (by the bridge's log, the
+        velocity profile's sensor did not go stale before the agent's watchdog tripped: the
+        rig's driver shares this process, and a thread of it held there for half a watchdog
+        leaves a tick without its sample, which the stall monitor does not see):
         ``stopped(frames)`` gives the kernel timestamp of the agent's last command among
         ``frames`` and those of the stop frames after it (``(None, [])`` before there is one);
         the episode is judged once it has :data:`STOPS_SEEN`. ``ready()``, if given, is
@@ -370,11 +382,13 @@ class DriverRig:
             last, stops = stopped(frames)
             stalled = self.stall_ms(last, stops[0])
             late_ms = self.trip_silence_ms(AGENT_SILENT, logged) - WATCHDOG_MS
-            if stalled <= STALL_MS and late_ms <= LATE_TRIP_MS:
+            sensor_first = self.told_before(SENSOR_STALE, AGENT_SILENT, logged)
+            if stalled <= STALL_MS and late_ms <= LATE_TRIP_MS and not sensor_first:
                 return tripped, frames, last, stops, stalled
             print(
                 f"\nattempt {attempt}: the host stalled the rig for {stalled:.0f} ms; the bridge"
-                f" tripped {late_ms:.0f} ms after its deadline: again"
+                f" tripped {late_ms:.0f} ms after its deadline; the sensor's stop came"
+                f" {'first' if sensor_first else 'not first'}: again"
             )
         raise AssertionError(
             f"the host stalled the rig, or the bridge tripped late, in each of {ATTEMPTS} attempts"

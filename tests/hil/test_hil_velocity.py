@@ -32,6 +32,7 @@ from tests.helpers.hil import (
     LATE_TRIP_MS,
     PERIOD,
     RIG_TEAM,
+    SENSOR_STALE,
     STALL_MS,
     STOPS_SEEN,
     WATCHDOG_MS,
@@ -51,9 +52,8 @@ PUSH_N = 5.0
 """N: the echo agent's pushes (``--push``)."""
 UNLOADED = (0.5, -0.25)
 """N: the sensor's raw reading, its bias alone (nothing presses on it)."""
-AGENT_BACK, SENSOR_STALE = "commands are back", "sensor stale"
-"""What the bridge logs when its agent's watchdog clears (it trips: ``AGENT_SILENT``), and when
-the sensor is stale (:meth:`bridge.bridge.Bridge.watchdog`)."""
+AGENT_BACK = "commands are back"
+"""What the bridge logs when its agent's watchdog clears (it trips: ``AGENT_SILENT``)."""
 FAULT = 1 << next(bit for bit, name in SENSOR_STATUS_BITS.items() if name == "FAULT")
 
 
@@ -187,8 +187,9 @@ class VelocityRig(DriverRig):
             for line in log[:since].decode(errors="replace").splitlines()
             if AGENT_SILENT in line or AGENT_BACK in line
         ]
-        after = log[since:].decode(errors="replace").split(SENSOR_STALE, 1)[0]
-        return bool(told and AGENT_SILENT in told[-1]) or AGENT_SILENT in after
+        return bool(told and AGENT_SILENT in told[-1]) or self.told_before(
+            AGENT_SILENT, SENSOR_STALE, since
+        )
 
 
 @pytest.fixture(scope="module")
@@ -238,8 +239,9 @@ def test_the_base_is_stopped_when_the_agent_is_killed(rig: VelocityRig) -> None:
     VELOCITY within the watchdog plus or minus one frame period, by the frames' kernel
     timestamps, plus however long the host stalled the machine meanwhile
     (:func:`assert_stopped`), then one a tick; the base drives again once the agent is back. An
-    episode in which the host stalled it for more than :data:`~tests.helpers.hil.STALL_MS` is
-    measured again."""
+    episode in which the host stalled it for more than :data:`~tests.helpers.hil.STALL_MS`, or
+    held the rig's driver until the sensor's stop came first, is measured again
+    (:meth:`~tests.helpers.hil.DriverRig.stop_when_killed`)."""
 
     def pushing() -> None:  # the agent pushes: the loop commands a velocity
         rig.drives_again(len(rig.frames))
