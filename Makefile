@@ -10,7 +10,8 @@ demo: $(STAMP)  ## The paper's scenario, 4 robot processes over Zenoh in real ti
 	$(BIN)/heft demo --out out/paper-results.json --plot out/plots
 
 test: $(STAMP) lint  ## Lint, then every test: unit, integration and browser, then on vcan, then multi-host.
-	$(BIN)/python -m pytest -q tests/unit tests/integration tests/browser
+	$(BIN)/python -m pytest -q -n auto tests/unit
+	$(BIN)/python -m pytest -q tests/integration tests/browser
 	$(MAKE) --no-print-directory hil
 	$(MAKE) --no-print-directory multihost
 
@@ -24,8 +25,8 @@ hil: $(STAMP)  ## tests/hil on real vcan (in User-Mode Linux if this kernel has 
 multihost: $(STAMP)  ## tests/multihost: network namespaces as hosts, mutual TLS (root).
 	$(BIN)/python -m pytest -q -s tests/multihost -p no:cacheprovider
 
-test-unit: $(STAMP)  ## The unit tests only (tests/unit: one process, no Zenoh, no network).
-	$(BIN)/python -m pytest -q tests/unit
+test-unit: $(STAMP)  ## The unit tests only (tests/unit: no Zenoh, no network), on every CPU.
+	$(BIN)/python -m pytest -q -n auto tests/unit
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
