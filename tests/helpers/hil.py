@@ -391,7 +391,8 @@ class DriverRig:
                 f" {'first' if sensor_first else 'not first'}: again"
             )
         raise AssertionError(
-            f"the host stalled the rig, or the bridge tripped late, in each of {ATTEMPTS} attempts"
+            f"the host stalled the rig, the bridge tripped late, or the sensor's stop came first,"
+            f" in each of {ATTEMPTS} attempts"
         )
 
     def kill_agent(self) -> None:
