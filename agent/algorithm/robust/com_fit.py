@@ -12,10 +12,23 @@ Integrating twice from the push's first instant ``t₀``,
     θ(t) = θ₀ + ω₀ (t − t₀) + Ψ(t)ᵀ c,      Ψ(t) = ∫_{t₀}^{t} ∫_{t₀}^{s} φ dr ds,
 
 linear in ``(θ₀, ω₀, c_x, c_y)`` (a force ``a(t)`` that every robot adds to the push,
-``push_damping``'s, adds ``(n/J) R(−α) Qᵀ a`` to ``φ``; with the drives' lag ``τ_d`` from Step 4,
-``Ψ − τ_d ∫φ + τ_d² φ`` in place of ``Ψ``, as in :mod:`agent.algorithm.robust.mass_fit`): least
-squares on the angle itself (tracked from the arc fits, :mod:`agent.algorithm.robust.arc_fit`),
-never on a differentiated or filtered ω. Over an
+``push_damping``'s, adds ``(n/J) R(−α) Qᵀ a`` to ``φ``): least squares on the angle itself
+(tracked from the arc fits, :mod:`agent.algorithm.robust.arc_fit`), never on a differentiated
+or filtered ω.
+
+The drives' lag ``τ_d`` (Step 4's fit) acts on the forces in ``W``: the load feels
+``y = K[s f + a]``, ``τ_d ẏ + y = s f + a``, and its torque about the COM is ``z_C(t) × y(t)``
+with ``z_C`` turning with the load. So ``φ`` takes the drives' response ``K[s]`` (and ``K[a]``)
+in place of the sign, averaged over each interval ``h`` with the command ``u`` held,
+``ȳ = u + (y₀ − u)(τ_d/h)(1 − e^{−h/τ_d})`` (exact for a first-order lag), and turns that with
+the load. (Lagging ``φ`` itself, ``Ψ − τ_d ∫φ + τ_d² φ``, as
+:mod:`agent.algorithm.robust.mass_fit` does for a load that hardly turns, lags the turn of
+``z_C`` too: a rotation of the push by ``τ_d ω`` about the COM. With little noise (1 mm/s,
+0.05 N), 20 ms drives and the paper's load turning at 1 rad/s, that put Step 5's offset
+2.6–3.1 mm off, this 0.7–1.3 mm: docs/benchmarks.md, "Step 5's model".) The
+response starts at zero at ``t₀``; where the drives were already pushing, the two differ by a
+transient whose double integral is linear in ``t`` once it has died out, which ``θ₀`` and
+``ω₀`` take up. The known torque below goes through the same response. Over an
 interval ``h`` the regressor's integrals grow by the trapezoid ``∫φ ≈ h (φ₀ + φ₁)/2`` (made
 exact for a uniform turn by :func:`~agent.platform.geometry.arc_factor`) and
 ``∫∫φ ≈ h ∫φ(t) + h² (φ₀/3 + φ₁/6)``. ``c`` is determined once the load has turned enough
@@ -26,9 +39,19 @@ constant torque of its own that keeps it turning (:mod:`agent.algorithm.robust.p
 the load turns one way (``s_ω``) both are a constant ``d`` in ``θ̈``, so a fifth column
 ``Σ_ω = ∫∫ s_ω`` with the unknown ``d`` takes them up (0 on a frictionless floor without that
 torque). The brake the team adds to that torque as the turn nears ``max_turn_rate``, ``τ_b(t)``,
-is known to every robot: its turn ``∫∫ τ_b / J`` is taken out of the angle. The torque of
-friction's force about the COM vanishes to first order in ``‖ṗ_C‖ / (|ω| r)``
-(docs/estimator.md, "Friction"), which the experiment keeps small.
+is known to every robot: its turn through the drives, ``∫∫ K[τ_b] / J``, is taken out of the
+angle.
+
+The floor's torque is ``−τ_c sgn ω`` only while the COM is slow against the supports' speed:
+as the COM moves, it falls, as ``ρ d`` with Step 7's drag ``d = ω / √(‖ṗ_C‖² + ω² ρ² + v₀²)``
+(:mod:`agent.algorithm.robust.hold_fit`, ``ρ = √(w/n)``), and the push swings ``ṗ_C`` with
+its sign, so its fall is correlated with ``Ψ``. A sixth column ``∫∫ (ρ d − s_ω)`` takes it up
+(its coefficient ``−τ_c/J``; the fifth keeps the constant), with ``ṗ_C`` from the robot's own
+velocity, ``ω`` and the fit's ``ẑ_C`` so far (eq. 7; the centroid's before there is one). The
+difference rather than ``∫∫ ρ d`` itself: the two nearly agree while the COM is slow, and the
+normal equations of nearly equal columns lose the residual to cancellation. Without it, on
+generated loads on floors, Step 5's ``ẑ_C`` was off by several times more than with it (see
+docs/benchmarks.md, "Step 5's model").
 
 Uncertainty: the fit's ``σ̂² M⁻¹`` for ``c``, scaled for the angle's correlated errors as in
 :mod:`agent.algorithm.robust.inertia_fit`
@@ -49,10 +72,24 @@ class ComFit(RunFit):
     """Least-squares ``z_C`` from the rotation angle while the team pushes with ``f``."""
 
     def __init__(
-        self, n: int, moment: float, force: Vec2, forgetting: float = 1.0, lag: float = 0.0
+        self,
+        n: int,
+        moment: float,
+        force: Vec2,
+        forgetting: float = 1.0,
+        lag: float = 0.0,
+        drag: bool = False,
     ):
-        # rows [1, t − t₀, Ψ_x, Ψ_y, Σ_ω] (θ₀, ω₀, c_x, c_y, d) = α
-        super().__init__(5, forgetting)
+        # rows [1, t − t₀, Ψ_x, Ψ_y, Σ_ω] (θ₀, ω₀, c_x, c_y, d) = α, with ``drag`` a sixth
+        # column ∫∫ (ρ d − s_ω) (its coefficient −τ_c/J)
+        super().__init__(6 if drag else 5, forgetting)
+        self.drag_column = drag
+        """Whether the fit has the sixth column, the friction torque's fall (Step 5's)."""
+        self._drag = 0.0
+        self._drag_once = 0.0
+        self._drag_twice = 0.0
+        """The sixth column's integrand ``ρ d − s_ω`` at the last sample, its first integral
+        and its second."""
         k = n / moment
         self.k = k
         self.force = force
@@ -75,7 +112,11 @@ class ComFit(RunFit):
         integrand's first integral, then its second)."""
         self._torque_once = 0.0
         self._torque_twice = 0.0
-        """``∫∫ τ/J`` since the first sample: the turn of the known torque, taken out of α."""
+        """``∫∫ K[τ]/J`` since the first sample: the turn of the known torque through the
+        drives, taken out of α."""
+        self._response: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
+        """The drives' response ``K[·]`` to the push's sign, the added force (x, y) and the
+        known torque, at the last sample (zero at the first)."""
 
     def regressor(self, alpha: float) -> Vec2:
         """``φ = (n/J) R(−α) Qᵀ f``."""
@@ -90,19 +131,32 @@ class ComFit(RunFit):
         added: Vec2 = (0.0, 0.0),
         spin: float = 1.0,
         torque: float = 0.0,
+        drag: float = 0.0,
     ) -> None:
         """Feed the rotation ``α`` since the push began, at the end of an interval ``dt``
         during which the team pushed with the mean sign ``sign``, each robot added the
         mean force ``added``, the team a mean torque ``torque`` about the COM beyond the
-        constant ``d`` (N m: the brake as the turn nears ``max_turn_rate``) and the load
-        turned the way ``spin`` (the first call, at the push's first instant, starts)."""
-        self._add_row(alpha, sign, dt, added, spin, torque)
+        constant ``d`` (N m: the brake as the turn nears ``max_turn_rate``), the load
+        turned the way ``spin`` and the sixth column's integrand ``ρ d − s_ω`` was ``drag``
+        at the end of it (the first call, at the push's first instant, starts)."""
+        self._add_row(alpha, sign, dt, added, spin, torque, drag)
 
     def _add_row(
-        self, alpha: float, sign: float, dt: float, added: Vec2, column: float, torque: float
+        self,
+        alpha: float,
+        sign: float,
+        dt: float,
+        added: Vec2,
+        column: float,
+        torque: float,
+        drag: float = 0.0,
     ) -> None:
         """The row at ``α``: the regressor's integrals over the interval ``dt``, the fifth
-        column's integrand ``column`` and the known ``torque`` (N m) over it; solves."""
+        column's integrand ``column``, the sixth's ``drag`` (trapezoid) and the known
+        ``torque`` (N m) over it, the push and the torque through the drives' lag
+        (:meth:`_through_drives`); solves."""
+        if self.started and self.lag > 0.0:
+            sign, added, torque = self._through_drives(dt, sign, added, torque)
         k = self.k
         ax, ay = k * added[1], -k * added[0]  # (n/J) Qᵀ a
         c, s = math.cos(-alpha), math.sin(-alpha)  # R(−α)
@@ -127,25 +181,37 @@ class ComFit(RunFit):
             u = torque * self.inverse_moment  # τ / J
             self._torque_twice += self._torque_once * dt + 0.5 * u * dd
             self._torque_once += u * dt
+            if self.drag_column:
+                d0 = self._drag
+                self._drag_twice += self._drag_once * dt + dd * (d0 / 3.0 + drag / 6.0)
+                self._drag_once += 0.5 * dt * (d0 + drag)
             self.t += dt
+        self._drag = drag
         self.started = True
         self._alpha, self._turned, self._regressor = alpha, (c, s), (px, py)
-        (sx, sy), (ox, oy), lag = self._twice, self._once, self.lag
-        lag2, lagged = lag * lag * sign, lag * lag
-        self.fit.add(
-            (
-                1.0,
-                self.t,
-                sx - lag * ox + lag2 * px + lagged * ex,
-                sy - lag * oy + lag2 * py + lagged * ey,
-                self._column_twice,
-            ),
-            alpha - self._known_turn(torque * self.inverse_moment),
-        )
+        sx, sy = self._twice
+        row = (1.0, self.t, sx, sy, self._column_twice)
+        if self.drag_column:
+            row = (*row, self._drag_twice)
+        self.fit.add(row, alpha - self._known_turn())
         self._solve()
 
-    def _known_turn(self, now: float) -> float:
-        """The turn ``∫∫ τ/J`` of the known torque (``now``: ``τ/J`` over the last interval)."""
+    def _through_drives(
+        self, dt: float, sign: float, added: Vec2, torque: float
+    ) -> tuple[float, Vec2, float]:
+        """The push's sign, the added force and the known torque as the drives apply them
+        over an interval ``dt`` with these commanded: the means of their first-order responses
+        (see the module docstring), which the interval leaves where it ends."""
+        decay = math.exp(-dt / self.lag)
+        share = self.lag / dt * (1.0 - decay)
+        commanded = (sign, added[0], added[1], torque)
+        before = self._response
+        self._response = tuple(u + (y - u) * decay for u, y in zip(commanded, before))
+        s, ax, ay, tau = (u + (y - u) * share for u, y in zip(commanded, before))
+        return s, (ax, ay), tau
+
+    def _known_turn(self) -> float:
+        """The turn ``∫∫ K[τ]/J`` of the known torque through the drives."""
         return self._torque_twice
 
     @property
@@ -173,7 +239,8 @@ class ComFit(RunFit):
         if fit is None:
             return None
         k, inverse = self._scale * fit.variance, fit.inverse  # as :attr:`covariance`
-        return largest_std(k * inverse[12], k * inverse[13], k * inverse[18])
+        p = self.fit.params
+        return largest_std(k * inverse[2 * p + 2], k * inverse[2 * p + 3], k * inverse[3 * p + 3])
 
     def com_offset(self, alpha: float) -> Vec2 | None:
         """``z_C = R(α) c`` after a rotation ``α``."""

@@ -16,8 +16,8 @@ Step 5 (:mod:`agent.algorithm.robust.com_fit`, eq. 18), with ``z_C(t) = R(α(t))
     θ(t) − K[∫∫ τ_h/J] = θ₀ + ω₀ (t − t₀) + Ψ(t)ᵀ c₀ − (β/J) ∫∫ d,
 
 ``Ψ`` Step 5's regressor's double integral for the common force ``c(t) = s(t) f + a(t)``.
-``K`` is the drives' lag ``τ_d`` (Step 4) on the known torque, to first order
-``K[∫∫u] = ∫∫u − τ_d ∫u + τ_d² u`` as on the push: the holding torque cancels most of the
+``K`` is the drives' first-order response (their lag ``τ_d``, Step 4's) on the known torque,
+as on the push (:mod:`agent.algorithm.robust.com_fit`): the holding torque cancels most of the
 push's, and what turns the load is the small difference of two large torques (with the push
 lagged and the known torque not, generated load 13's estimate moved the wrong way by 4.4 cm
 on the noise benchmark's floor). The holding torque is what this robot
@@ -136,13 +136,12 @@ class HoldFit(ComFit):
         vx, vy = com_velocity
         return omega / math.sqrt(vx * vx + vy * vy + (omega * radius) ** 2 + SPEED_FLOOR**2)
 
-    def _known_turn(self, now: float) -> float:
-        """``K[∫∫ τ_h/J]``: the known torque's turn through the drives' lag, its damping
-        ``−D ω`` as ``−(D/J) (∫(α − α₀) − τ_d (α − α₀))`` from the angle."""
-        lag = self.lag
-        pushed = self._torque_twice - lag * self._torque_once + lag * lag * now
+    def _known_turn(self) -> float:
+        """``K[∫∫ τ_h/J]``: the known torque's turn through the drives (:class:`ComFit`'s
+        response), its damping ``−D ω`` as ``−(D/J) (∫(α − α₀) − τ_d (α − α₀))`` from the
+        angle."""
         turned = self._alpha - self._alpha_first
-        return pushed - self._damping * (self._angle_once - lag * turned)
+        return self._torque_twice - self._damping * (self._angle_once - self.lag * turned)
 
     def _solve(self) -> None:
         information = self._information

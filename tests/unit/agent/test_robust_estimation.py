@@ -542,6 +542,66 @@ def test_com_fit_with_a_reversing_push() -> None:
     assert math.dist(fit.estimate, c) < 5e-5
 
 
+def _started(**fits: ComFit) -> dict[str, ComFit]:
+    """``fits`` by name, each started at the push's first instant (α = 0)."""
+    for fit in fits.values():
+        fit.update(0.0, 1.0, DT)
+    return fits
+
+
+def _push_torque(n: int, force, c, theta: float) -> float:
+    """``n z_C × f`` about the COM, ``z_C = R(θ) c``: the common force ``f`` at the centroid."""
+    zc = rotate(c, theta)
+    return n * (zc[0] * force[1] - zc[1] * force[0])
+
+
+@pytest.mark.parametrize("lag", [0.02, 0.05])
+def test_com_fit_through_lagging_drives_while_the_load_turns(lag: float) -> None:
+    """The drives lag the push in ``W`` while ``z_C`` turns with the load: the torque is
+    ``n z_C(t) × K[s f](t)``. The fit that takes the drives' response in place of the sign finds
+    ``c`` to a small fraction of the rotation by ``τ_d ω`` that lagging the regressor itself
+    would leave (``τ_d ω |c|``: 1.6 and 3.9 mm here), and one that ignores the lag is off."""
+    n, moment, force, c = 4, 12.0, (0.0, 3.0), (-0.12, 0.05)
+    commanded, _ = _reversing_push(4.0, 1.0)
+    theta, omega, fine, level = 0.0, 0.6, 100, 0.0
+    fits = _started(modelled=ComFit(n, moment, force, lag=lag), ignored=ComFit(n, moment, force))
+    for sign in commanded:
+        for _ in range(fine):
+            level += (sign - level) * (1.0 - math.exp(-DT / fine / lag))
+            omega += level * _push_torque(n, force, c, theta) / moment * DT / fine
+            theta += omega * DT / fine
+        for fit in fits.values():
+            fit.update(theta, sign, DT)
+    error = {name: math.dist(fit.estimate, c) for name, fit in fits.items()}
+    assert error["modelled"] < 0.05 * lag * omega * math.hypot(*c), error
+    assert error["ignored"] > 20 * error["modelled"], error
+
+
+def test_com_fit_takes_the_floors_torque_falling_as_the_com_moves() -> None:
+    """On a floor the torque against the turn is ``τ_c ρ d``, ``d = ω / √(v² + ω² ρ²)``: it
+    falls as the COM speeds up under the push, whose sign the speed follows, so it turns the
+    load as the push does. Step 5's sixth column takes that fall up; the fit without it is 13 mm
+    off."""
+    n, moment, force, c = 4, 12.0, (0.0, 3.0), (-0.12, 0.05)
+    radius, friction, keep, mass = 0.8, 2.0, 2.0, 20.0
+    commanded, _ = _reversing_push(6.0, 2.0)
+    theta, omega, speed, fine = 0.0, 1.0, 0.0, 100
+    fits = _started(drag=ComFit(n, moment, force, drag=True), none=ComFit(n, moment, force))
+    for sign in commanded:
+        for _ in range(fine):
+            push = sign * _push_torque(n, force, c, theta)
+            fall = radius * omega / math.sqrt(speed * speed + (omega * radius) ** 2)
+            omega += (push + keep - friction * fall) / moment * DT / fine
+            theta += omega * DT / fine
+            speed += sign * n * force[1] / mass * DT / fine
+        drag = radius * omega / math.sqrt(speed * speed + (omega * radius) ** 2) - 1.0
+        for name, fit in fits.items():
+            fit.update(theta, sign, DT, drag=drag if name == "drag" else 0.0)
+    error = {name: math.dist(fit.estimate, c) for name, fit in fits.items()}
+    assert error["drag"] < 1e-4, error
+    assert error["none"] > 100 * error["drag"] and error["none"] > 5e-3, error
+
+
 def test_mass_and_com_fits_take_a_damped_push() -> None:
     """Every robot adds ``a = −b ṗ_G`` to the reversing push (``push_damping``): the COM's speed
     stays within ``f / b``, and both fits, told ``a`` per tick, stay exact."""
