@@ -336,7 +336,9 @@ class RobustPhases(PhaseMachine):
                 " estimate now (the team sizes Step 4 on the largest any robot measured when it"
                 f" was ready), asks more of Step 4 than max_force = {t.max_force:g} N a robot"
                 f" gives ({t.max_force * math.sqrt(w):.3g} N m, less than"
-                f" {LEAST_FRICTION_MARGIN:g} times the largest): the floor holds it"
+                f" {LEAST_FRICTION_MARGIN:g} times the largest): turned back and forth by it,"
+                " the load would stick and slip, which Step 4's fit does not model, so the team"
+                " stops pushing (the floor may still give way to that torque)"
             )
             return t.max_force
         return min(t.inertia_force * _level(inertia), t.max_force)
