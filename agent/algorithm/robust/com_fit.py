@@ -78,16 +78,16 @@ class ComFit(RunFit):
         force: Vec2,
         forgetting: float = 1.0,
         lag: float = 0.0,
-        drag: bool = False,
+        falling: bool = False,
     ):
-        # rows [1, t − t₀, Ψ_x, Ψ_y, Σ_ω] (θ₀, ω₀, c_x, c_y, d) = α, with ``drag`` a sixth
+        # rows [1, t − t₀, Ψ_x, Ψ_y, Σ_ω] (θ₀, ω₀, c_x, c_y, d) = α, with ``falling`` a sixth
         # column ∫∫ (ρ d − s_ω) (its coefficient −τ_c/J)
-        super().__init__(6 if drag else 5, forgetting)
-        self.drag_column = drag
+        super().__init__(6 if falling else 5, forgetting)
+        self.falling = falling
         """Whether the fit has the sixth column, the friction torque's fall (Step 5's)."""
-        self._drag = 0.0
-        self._drag_once = 0.0
-        self._drag_twice = 0.0
+        self._fall = 0.0
+        self._fall_once = 0.0
+        self._fall_twice = 0.0
         """The sixth column's integrand ``ρ d − s_ω`` at the last sample, its first integral
         and its second."""
         k = n / moment
@@ -131,15 +131,15 @@ class ComFit(RunFit):
         added: Vec2 = (0.0, 0.0),
         spin: float = 1.0,
         torque: float = 0.0,
-        drag: float = 0.0,
+        fall: float = 0.0,
     ) -> None:
         """Feed the rotation ``α`` since the push began, at the end of an interval ``dt``
         during which the team pushed with the mean sign ``sign``, each robot added the
         mean force ``added``, the team a mean torque ``torque`` about the COM beyond the
         constant ``d`` (N m: the brake as the turn nears ``max_turn_rate``), the load
-        turned the way ``spin`` and the sixth column's integrand ``ρ d − s_ω`` was ``drag``
+        turned the way ``spin`` and the sixth column's integrand ``ρ d − s_ω`` was ``fall``
         at the end of it (the first call, at the push's first instant, starts)."""
-        self._add_row(alpha, sign, dt, added, spin, torque, drag)
+        self._add_row(alpha, sign, dt, added, spin, torque, fall)
 
     def _add_row(
         self,
@@ -149,10 +149,10 @@ class ComFit(RunFit):
         added: Vec2,
         column: float,
         torque: float,
-        drag: float = 0.0,
+        fall: float = 0.0,
     ) -> None:
         """The row at ``α``: the regressor's integrals over the interval ``dt``, the fifth
-        column's integrand ``column``, the sixth's ``drag`` (trapezoid) and the known
+        column's integrand ``column``, the sixth's ``fall`` (trapezoid) and the known
         ``torque`` (N m) over it, the push and the torque through the drives' lag
         (:meth:`_through_drives`); solves."""
         if self.started and self.lag > 0.0:
@@ -181,18 +181,18 @@ class ComFit(RunFit):
             u = torque * self.inverse_moment  # τ / J
             self._torque_twice += self._torque_once * dt + 0.5 * u * dd
             self._torque_once += u * dt
-            if self.drag_column:
-                d0 = self._drag
-                self._drag_twice += self._drag_once * dt + dd * (d0 / 3.0 + drag / 6.0)
-                self._drag_once += 0.5 * dt * (d0 + drag)
+            if self.falling:
+                d0 = self._fall
+                self._fall_twice += self._fall_once * dt + dd * (d0 / 3.0 + fall / 6.0)
+                self._fall_once += 0.5 * dt * (d0 + fall)
             self.t += dt
-        self._drag = drag
+        self._fall = fall
         self.started = True
         self._alpha, self._turned, self._regressor = alpha, (c, s), (px, py)
         sx, sy = self._twice
         row = (1.0, self.t, sx, sy, self._column_twice)
-        if self.drag_column:
-            row = (*row, self._drag_twice)
+        if self.falling:
+            row = (*row, self._fall_twice)
         self.fit.add(row, alpha - self._known_turn())
         self._solve()
 

@@ -380,21 +380,21 @@ class RobustPipeline(EstimationPipeline):
     def _new_com(self, schedule: ProbeSchedule) -> ComFit:
         self.lag = self.inertia.lag  # the drives' lag, which Step 4's fit found
         return ComFit(
-            self.n, schedule.moment_used, schedule.push, self.forgetting, self.lag, drag=True
+            self.n, schedule.moment_used, schedule.push, self.forgetting, self.lag, falling=True
         )
 
     def _update_com(
         self, alpha: float, sign: float, span: float, added: Vec2, torque: float = 0.0
     ) -> None:
-        drag = 0.0
-        if self.com.drag_column and self.velocity is not None:
+        fall = 0.0
+        if self.com.falling and self.velocity is not None:
             radius = math.sqrt(self.mean_square_offset)
             z_c = self._push_offset(alpha) if self.com.estimate is not None else (0.0, 0.0)
             x = self.consensus.centroid
             omega = self.omega or 0.0
             velocity = com_velocity(self.velocity, omega, (x[0] + z_c[0], x[1] + z_c[1]))
-            drag = radius * HoldFit.drag(omega, velocity, radius) - self._spin
-        self.com.update(alpha, sign, span, added=added, spin=self._spin, torque=torque, drag=drag)
+            fall = radius * HoldFit.drag(omega, velocity, radius) - self._spin
+        self.com.update(alpha, sign, span, added=added, spin=self._spin, torque=torque, fall=fall)
 
     def _held(self, alpha: float, sign: float, span: float, added: Vec2, torque: float) -> None:
         """Step 7's refinement of ``z_C`` (:class:`~agent.algorithm.robust.hold_fit.HoldFit`),

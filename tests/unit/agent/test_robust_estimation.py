@@ -586,7 +586,7 @@ def test_com_fit_takes_the_floors_torque_falling_as_the_com_moves() -> None:
     radius, friction, keep, mass = 0.8, 2.0, 2.0, 20.0
     commanded, _ = _reversing_push(6.0, 2.0)
     theta, omega, speed, fine = 0.0, 1.0, 0.0, 100
-    fits = _started(drag=ComFit(n, moment, force, drag=True), none=ComFit(n, moment, force))
+    fits = _started(fall=ComFit(n, moment, force, falling=True), none=ComFit(n, moment, force))
     for sign in commanded:
         for _ in range(fine):
             push = sign * _push_torque(n, force, c, theta)
@@ -594,12 +594,12 @@ def test_com_fit_takes_the_floors_torque_falling_as_the_com_moves() -> None:
             omega += (push + keep - friction * fall) / moment * DT / fine
             theta += omega * DT / fine
             speed += sign * n * force[1] / mass * DT / fine
-        drag = radius * omega / math.sqrt(speed * speed + (omega * radius) ** 2) - 1.0
+        fall = radius * omega / math.sqrt(speed * speed + (omega * radius) ** 2) - 1.0
         for name, fit in fits.items():
-            fit.update(theta, sign, DT, drag=drag if name == "drag" else 0.0)
+            fit.update(theta, sign, DT, fall=fall if name == "fall" else 0.0)
     error = {name: math.dist(fit.estimate, c) for name, fit in fits.items()}
-    assert error["drag"] < 1e-4, error
-    assert error["none"] > 100 * error["drag"] and error["none"] > 5e-3, error
+    assert error["fall"] < 1e-4, error
+    assert error["none"] > 100 * error["fall"] and error["none"] > 5e-3, error
 
 
 def test_mass_and_com_fits_take_a_damped_push() -> None:
