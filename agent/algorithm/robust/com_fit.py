@@ -25,7 +25,7 @@ the load. (Lagging ``φ`` itself, ``Ψ − τ_d ∫φ + τ_d² φ``, as
 :mod:`agent.algorithm.robust.mass_fit` does for a load that hardly turns, lags the turn of
 ``z_C`` too: a rotation of the push by ``τ_d ω`` about the COM. With little noise (1 mm/s,
 0.05 N), 20 ms drives and the paper's load turning at 1 rad/s, that put Step 5's offset
-2.6–3.1 mm off, this 0.7–1.3 mm: docs/benchmarks.md, "Step 5's model".) The
+2.6–3.1 mm off, this 0.6–1.3 mm: docs/benchmarks.md, "Step 5's model".) The
 response starts at zero at ``t₀``; where the drives were already pushing, the two differ by a
 transient whose double integral is linear in ``t`` once it has died out, which ``θ₀`` and
 ``ω₀`` take up. The known torque below goes through the same response. Over an
@@ -117,6 +117,10 @@ class ComFit(RunFit):
         self._response: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
         """The drives' response ``K[·]`` to the push's sign, the added force (x, y) and the
         known torque, at the last sample (zero at the first)."""
+        self._response_dt = 0.0
+        self._decay = (0.0, 0.0)
+        """The interval ``h`` that the response's decay and mean share,
+        ``(e^{−h/τ_d}, (τ_d/h)(1 − e^{−h/τ_d}))``, were computed for, and they."""
 
     def regressor(self, alpha: float) -> Vec2:
         """``φ = (n/J) R(−α) Qᵀ f``."""
@@ -202,8 +206,10 @@ class ComFit(RunFit):
         """The push's sign, the added force and the known torque as the drives apply them
         over an interval ``dt`` with these commanded: the means of their first-order responses
         (see the module docstring), which the interval leaves where it ends."""
-        decay = math.exp(-dt / self.lag)
-        share = self.lag / dt * (1.0 - decay)
+        if dt != self._response_dt:  # the intervals are one tick but for late instants
+            decay = math.exp(-dt / self.lag)
+            self._response_dt, self._decay = dt, (decay, self.lag / dt * (1.0 - decay))
+        decay, share = self._decay
         commanded = (sign, added[0], added[1], torque)
         before = self._response
         self._response = tuple(u + (y - u) * decay for u, y in zip(commanded, before))
