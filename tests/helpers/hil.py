@@ -55,13 +55,13 @@ STOPS_SEEN = 10
 """Stop frames the tests read after a stop before they judge it."""
 
 
-def assert_within_watchdog(delay_ms: float, stalled_ms: float) -> None:
+def assert_within_watchdog(delay_ms: float, stalled_ms: float, period: float = PERIOD) -> None:
     """A stop ``delay_ms`` after what caused it, by the frames' kernel timestamps, came within
-    the watchdog plus or minus one frame period, plus however long the host stood the machine
-    still meanwhile (``stalled_ms``, :meth:`DriverRig.stall_ms`): nothing in it, the bridge
+    the watchdog plus or minus one frame ``period`` (s), plus however long the host stood the
+    machine still meanwhile (``stalled_ms``, :meth:`DriverRig.stall_ms`): nothing in it, the bridge
     included, could act then. (The watchdog starts when the bridge hears, before the frame
     that the tests time is written: the stop can come up to a frame period early.)"""
-    low, high = WATCHDOG_MS - PERIOD * 1e3, WATCHDOG_MS + PERIOD * 1e3 + stalled_ms
+    low, high = WATCHDOG_MS - period * 1e3, WATCHDOG_MS + period * 1e3 + stalled_ms
     assert low <= delay_ms <= high, f"{delay_ms:.1f} ms, not within {low:.0f}-{high:.1f} ms"
 
 
@@ -172,9 +172,9 @@ class DriverRig:
     """A :class:`~bridge.devtools.rig.BridgeRig` on ``channel`` (router, ``heft bridge`` of
     ``profile`` with a :data:`WATCHDOG_MS` watchdog under ``SCHED_FIFO``, as on a robot, and
     the echo agent, pushing ``push_n`` newtons if given), and here AGV node 1's driver: the
-    frames of :meth:`tick_frames` every :data:`PERIOD`, a heartbeat every 100 ms; a reader of
-    the frames with the ids ``listened`` (a kernel filter keeps the rest out of its socket)
-    with their kernel timestamps, in :attr:`frames`; and the stall monitor
+    frames of :meth:`tick_frames` every ``period`` (:data:`PERIOD`), a heartbeat every 10
+    ticks; a reader of the frames with the ids ``listened`` (a kernel filter keeps the rest
+    out of its socket) with their kernel timestamps, in :attr:`frames`; and the stall monitor
     (:meth:`stall_ms`). :attr:`sent` counts every frame sent from here."""
 
     def __init__(
@@ -184,14 +184,17 @@ class DriverRig:
         listened: tuple[int, ...],
         profile: str = "force",
         push_n: float | None = None,
+        period: float = PERIOD,
     ) -> None:
         self.channel = channel
+        self.period = period
+        """s: the driver's tick."""
         self.codec = AgvCodec(profile)
         self.listened = listened
         self.rig = BridgeRig(
             channel,
             folder,
-            PERIOD,
+            period,
             RIG_TEAM,
             WATCHDOG_MS,
             realtime_priority=50,
@@ -205,6 +208,8 @@ class DriverRig:
             [sys.executable, "-m", "tests.helpers.stall_monitor", str(self.stalls)]
         )
         self.tick = 0
+        self.ticked: list[float] = []
+        """When (``time.time``) the driver sent each tick's frames."""
         self.beats = 0
         self.sent = 0
         """Frames the driver has sent."""
@@ -261,11 +266,12 @@ class DriverRig:
                     if k % 10 == 0:
                         self.heartbeat()
                     self.tick = k + 1
+                    self.ticked.append(time.time())
             if paused:
-                time.sleep(PERIOD)
+                time.sleep(self.period)
                 due = time.monotonic()
                 continue
-            due += PERIOD
+            due += self.period
             time.sleep(max(0.0, due - time.monotonic()))
 
     def _listen(self) -> None:
@@ -300,6 +306,17 @@ class DriverRig:
             woke, late = map(float, line.split())
             stalled += max(0.0, min(woke, end) - max(woke - late, start))
         return stalled * 1e3
+
+    def driver_held_ms(self, start: float, end: float) -> float:
+        """The longest time (ms) beyond a period that this process held its driver between
+        two ticks, within the wall-clock instants ``start`` to ``end``: the driver shares this
+        process, which the stall monitor does not watch, and a bus master held that long
+        leaves ticks without their samples."""
+        sent = self.ticked[:]
+        held = [
+            min(b, end) - max(a, start) for a, b in zip(sent, sent[1:]) if b > start and a < end
+        ]
+        return max(0.0, max(held, default=0.0) - self.period) * 1e3
 
     def frames_when(self, enough, what: str, timeout: float = 10.0) -> list:
         """A copy of :attr:`frames` once ``enough`` holds of it: the reader may trail what
@@ -359,7 +376,11 @@ class DriverRig:
         :data:`ATTEMPTS`), and whose first stop is the agent's (by the bridge's log, the
         velocity profile's sensor did not go stale before the agent's watchdog tripped: the
         rig's driver shares this process, and a thread of it held there for half a watchdog
-        leaves a tick without its sample, which the stall monitor does not see):
+        leaves a tick without its sample, which the stall monitor does not see), and in which
+        this process did not hold its driver between ticks for more than :data:`STALL_MS`
+        in the watchdog before the agent's last command (:meth:`driver_held_ms`: the agent's
+        answers to the ticks held then reach the bridge in a burst, its last one late, and
+        the stop seems early):
         ``stopped(frames)`` gives the kernel timestamp of the agent's last command among
         ``frames`` and those of the stop frames after it (``(None, [])`` before there is one);
         the episode is judged once it has :data:`STOPS_SEEN`. ``ready()``, if given, is
@@ -381,18 +402,25 @@ class DriverRig:
                 self.rig.start_agent()
             last, stops = stopped(frames)
             stalled = self.stall_ms(last, stops[0])
+            held = self.driver_held_ms(last - WATCHDOG_MS / 1e3, last)
             late_ms = self.trip_silence_ms(AGENT_SILENT, logged) - WATCHDOG_MS
             sensor_first = self.told_before(SENSOR_STALE, AGENT_SILENT, logged)
-            if stalled <= STALL_MS and late_ms <= LATE_TRIP_MS and not sensor_first:
+            if (
+                stalled <= STALL_MS
+                and held <= STALL_MS
+                and late_ms <= LATE_TRIP_MS
+                and not sensor_first
+            ):
                 return tripped, frames, last, stops, stalled
             print(
-                f"\nattempt {attempt}: the host stalled the rig for {stalled:.0f} ms; the bridge"
-                f" tripped {late_ms:.0f} ms after its deadline; the sensor's stop came"
+                f"\nattempt {attempt}: the host stalled the rig for {stalled:.0f} ms; this"
+                f" process held the driver {held:.0f} ms; the bridge tripped {late_ms:.0f} ms"
+                f" after its deadline; the sensor's stop came"
                 f" {'first' if sensor_first else 'not first'}: again"
             )
         raise AssertionError(
-            f"the host stalled the rig, the bridge tripped late, or the sensor's stop came first,"
-            f" in each of {ATTEMPTS} attempts"
+            f"the host stalled the rig, this process held its driver, the bridge tripped late,"
+            f" or the sensor's stop came first, in each of {ATTEMPTS} attempts"
         )
 
     def kill_agent(self) -> None:
