@@ -265,6 +265,12 @@ class EstimationPipeline:
             if moment is not None:
                 self.settle.moment.update((moment,), e, self._std(self.inertia))
 
+    def _contact_offset(self, z_c: Vec2) -> Vec2:
+        """``o = p_Ci − p_C = z_i + z_C``: this robot's contact from the COM, with ``z_i`` its
+        offset from the contacts' centroid (the team's consensus) and ``z_C`` the COM's."""
+        x = self.consensus.centroid
+        return (x[0] + z_c[0], x[1] + z_c[1])
+
     def _centre_of_mass_and_mass(
         self, e: int, prev: int | None, span: float, schedule: Schedule, inbox: Inbox
     ) -> None:
@@ -305,9 +311,7 @@ class EstimationPipeline:
         if self.mass_after_com and not self.settle.com_offset.settled:
             if self.mass_estimator is None:
                 return
-        z_c = self._push_offset(alpha)
-        x = self.consensus.centroid
-        offset = (x[0] + z_c[0], x[1] + z_c[1])
+        offset = self._contact_offset(self._push_offset(alpha))
         v_i = inbox.own_velocity.get(e)
         if v_i is None:
             return

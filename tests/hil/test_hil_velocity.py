@@ -143,8 +143,8 @@ class VelocityRig(DriverRig):
         self.playing = threading.Event()
         # One publisher for the rig's life, declared before any episode plays through it.
         self.player = tick_publisher(self.rig.session, Keys(RIG_TEAM).force(1))
-        self.threads.append(threading.Thread(target=self._play, daemon=True))
-        self.threads[-1].start()
+        self.playing_thread = threading.Thread(target=self._play, daemon=True)
+        self.playing_thread.start()
 
     def tick_frames(self, k: int) -> list:
         frames = [Sync(k), MotionFeedback(1, k % 16, (0.1, 0.2))]
@@ -175,7 +175,7 @@ class VelocityRig(DriverRig):
 
     def close(self) -> None:
         self.stop.set()
-        self.threads[-1].join(5)
+        self.playing_thread.join(5)
         self.player.undeclare()
         super().close()
 

@@ -390,9 +390,8 @@ class RobustPipeline(EstimationPipeline):
         if self.com.falling and self.velocity is not None:
             radius = math.sqrt(self.mean_square_offset)
             z_c = self._push_offset(alpha) if self.com.estimate is not None else (0.0, 0.0)
-            x = self.consensus.centroid
             omega = self.omega or 0.0
-            velocity = com_velocity(self.velocity, omega, (x[0] + z_c[0], x[1] + z_c[1]))
+            velocity = com_velocity(self.velocity, omega, self._contact_offset(z_c))
             fall = radius * HoldFit.drag(omega, velocity, radius) - self._spin
         self.com.update(alpha, sign, span, added=added, spin=self._spin, torque=torque, fall=fall)
 

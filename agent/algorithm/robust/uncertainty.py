@@ -64,9 +64,9 @@ is the latter's: the benchmark counts a robot's edges at once), 0.763 for ``cont
 friction`` (the paper's load on four casters, seeds 0–19) held ``m̂``'s truth only 85 % of the
 time at μ = 0.5 % and 5 %. ``contact_to_com`` stays 0.975: with 0.763 the same sweep held its
 truth 85 % of the time at μ = 2 % and 89 % at 0.5 %, where 0.88 would hold it 90 %.
-``coulomb`` takes the 336 printed: on the same runs of ``heft bench friction``, whose μ = 0
-the generated loads do not have, it holds ``μ̂``'s truth 92.5–97.5 % of the time at every μ
-(701 had been kept when 488 held it only 87.5 % of the time at μ = 0, two versions before)."""
+``coulomb`` takes the factor printed: on the same runs of ``heft bench friction``, whose μ = 0
+the generated loads do not have, 420 holds ``μ̂``'s truth 95–100 % of the time at every μ
+(2026-11-29; 336 held it 93.8–97.5 % on the same runs)."""
 
 
 STEP5_COM_VARIANCE = 2.87
