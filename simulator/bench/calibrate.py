@@ -26,6 +26,9 @@ describes, on the seeds it names by default:
   :data:`~agent.algorithm.robust.uncertainty.PUBLISHED_VARIANCE` on the published ``m̂``,
   ``Ĵ``, ``contact_to_com``, ``z_ij`` and the floor's friction, over the noise benchmark's runs
   of the generated loads on floors, seeds 0–39;
+- ``step5-com-variance``: :data:`~agent.algorithm.robust.uncertainty.STEP5_COM_VARIANCE` on
+  each robot's ``contact_to_com`` from Step 5's ``ẑ_C`` alone (not published: Step 7 refines
+  it), its whole covariance scaled, seeds 0–39;
 - ``direction-variance``: :data:`~agent.algorithm.robust.arc_fit.DIRECTION_VARIANCE` on the
   variance across each ``z_ij`` (the direction filter's ``r² P``), the ellipse taken without
   ``PUBLISHED_VARIANCE``, seeds 0–39;
@@ -173,6 +176,20 @@ def published_variance(results: Sequence) -> list[Factor]:
     ]
 
 
+def step5_com_variance(results: Sequence) -> list[Factor]:
+    """:data:`~agent.algorithm.robust.uncertainty.STEP5_COM_VARIANCE` from the seeds'
+    results: each robot's ``contact_to_com`` from Step 5's ``ẑ_C`` alone (``push_offset``), its
+    whole covariance scaled, as it was when Step 5's ``ẑ_C`` was the one published."""
+    from agent.algorithm.robust.uncertainty import STEP5_COM_VARIANCE
+
+    offset = [
+        planar_factor(0.0, distance2(s.error, s.covariance))
+        for result in results
+        for s in result.intervals.get("push_offset", [])
+    ]
+    return [Factor("contact_to_com from Step 5's z_C", STEP5_COM_VARIANCE, tuple(offset))]
+
+
 def direction_variance(results: Sequence) -> list[Factor]:
     """:data:`~agent.algorithm.robust.arc_fit.DIRECTION_VARIANCE` from the seeds' results:
     each published ``z_ij``'s covariance is ``R (Var(r̂) u uᵀ + D r² P u⊥ u⊥ᵀ)``, ``u`` along
@@ -312,6 +329,15 @@ CALIBRATIONS = (
         0,
         40,
         published_variance,
+    ),
+    Calibration(
+        "step5-com-variance",
+        "STEP5_COM_VARIANCE",
+        "agent/algorithm/robust/uncertainty.py",
+        "the factor on the variance of Step 5's z_C, which Step 7's fits take as known",
+        0,
+        40,
+        step5_com_variance,
     ),
     Calibration(
         "direction-variance",

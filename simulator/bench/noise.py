@@ -249,7 +249,8 @@ class SeedResult:
     (:func:`~simulator.results.floor_check`)."""
     intervals: dict[str, list[Interval]] = field(default_factory=dict)
     """The robust run's published estimates (:func:`published`): ``mass``, ``moment``,
-    ``contact_to_com``, ``relative_positions`` (one per edge) and ``own_mass``."""
+    ``contact_to_com``, ``relative_positions`` (one per edge), ``own_mass`` and
+    ``push_offset``."""
     baseline_friction: dict[str, float | None] = field(default_factory=dict)
     """The batch fit's friction parameters and their standard deviations
     (:func:`baseline_friction`)."""
@@ -385,7 +386,9 @@ def published(sample: Sample, shares: dict[int, FitShares]) -> dict[str, list[In
     truth then (:class:`Interval`): ``mass`` (the team's), ``moment``, ``contact_to_com``, one
     ``relative_positions`` per edge, ``friction_torque`` and ``coulomb`` (the floor's, against
     ``μ m g c`` and ``μ``), and ``own_mass`` (the robot's own fit, not published),
-    with the shares of their fits (``shares``, per robot) for ``moment`` and ``own_mass``."""
+    with the shares of their fits (``shares``, per robot) for ``moment`` and ``own_mass``; and
+    ``push_offset``, ``contact_to_com`` from Step 5's ``ẑ_C`` alone (not published), its
+    covariance before :data:`~agent.algorithm.robust.uncertainty.STEP5_COM_VARIANCE`."""
     truth = sample.truth
     found: dict[str, list[Interval]] = {
         key: []
@@ -395,6 +398,7 @@ def published(sample: Sample, shares: dict[int, FitShares]) -> dict[str, list[In
             "contact_to_com",
             "relative_positions",
             "own_mass",
+            "push_offset",
             "friction_torque",
             "coulomb",
         )
@@ -425,6 +429,10 @@ def published(sample: Sample, shares: dict[int, FitShares]) -> dict[str, list[In
         if share.own_mass is not None:
             mass, std, fit_std = share.own_mass
             found["own_mass"].append(Interval(i, (mass,), (truth.mass,), (std * std,), fit_std))
+        if share.push_offset is not None:
+            offset, cov = share.push_offset
+            true_offset = tuple(truth.contact_to_com[i - 1])
+            found["push_offset"].append(Interval(i, tuple(offset), true_offset, tuple(cov)))
         for key, value, std, true in (
             ("friction_torque", est.friction_torque, est.friction_torque_std, truth.coulomb_torque),
             ("coulomb", est.coulomb, est.coulomb_std, truth.ground_coulomb),

@@ -547,7 +547,24 @@ class RobustPipeline(EstimationPipeline):
             own_mass=None
             if own is None or std is None or mass_std is None
             else (own, std, mass_std * self.consensus["mean_gain"]),
+            push_offset=self._push_contact_to_com(),
         )
+
+    def _push_contact_to_com(self) -> tuple[Vec2, tuple[float, float, float]] | None:
+        """``contact_to_com`` from Step 5's ``ẑ_C`` alone and its covariance before
+        :data:`~agent.algorithm.robust.uncertainty.STEP5_COM_VARIANCE`, as this robot would
+        publish them had Step 7 not refined it (``None``: no Step 5 fit, or a swung load's)."""
+        com = self.com
+        if com is None or (self.hold is not None and self.hold.swung > SWUNG_TURN):
+            return None
+        relative = {j: z for j in self.neighbours if (z := self.relative_position(j)) is not None}
+        edges = self._edge_covariances(relative)
+        z_c = self._push_offset(self.angle - self.push_angle)
+        cov = self._offset_covariance(com, edges, self._moment_std())
+        if z_c is None or cov is None:
+            return None
+        z_i = self.consensus.centroid
+        return (-(z_i[0] + z_c[0]), -(z_i[1] + z_c[1])), cov
 
     def consensus_state(self):
         """The consensus' states, with this robot's level of the load's rotation (sent modulo
@@ -562,19 +579,9 @@ class RobustPipeline(EstimationPipeline):
         :class:`~agent.platform.protocol.Estimates` (:mod:`agent.algorithm.robust.uncertainty`):
         ``relative`` are the ``z_ij`` reported, ``contact_to_com`` the offset reported (``None``:
         not yet)."""
-        edges = {}
-        for j in relative:
-            cov = self.edges[j].covariance
-            if cov is not None:
-                turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
-                edges[j] = packed(turned_covariance(cov, turned))
+        edges = self._edge_covariances(relative)
         drive_std = self.drive.std
-        gain_std = drive_std or 0.0
-        team_gain_std = gain_std / math.sqrt(self.n)
-        moment = self.moment
-        moment_std = self.inertia.std if self.inertia is not None else None
-        if moment_std is not None:
-            moment_std = math.hypot(moment_std * self._torque_gain, moment * team_gain_std)
+        moment_std = self._moment_std()
         _, mass_std = self._robust_mass()
         if mass_std is not None:
             c = self.consensus
@@ -603,24 +610,58 @@ class RobustPipeline(EstimationPipeline):
             if found is not None:
                 scale = math.sqrt(PUBLISHED_VARIANCE[key])
                 out[key], out[key + "_std"] = found[0], found[1] * scale
-        com_cov = None
         fit = self._com_fit
         if contact_to_com is not None and edges and fit is not None:
-            com_cov = fit.covariance
-        if com_cov is not None:
-            alpha = self.angle - self.push_angle
-            (a, b), (_, d) = turned_covariance(com_cov, alpha)
-            c = fit.com_offset(alpha)
-            rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
-            count = len(edges)
-            # σ_g² w / 2n²
-            weighted = gain_std * gain_std * self.mean_square_offset / (2.0 * self.n)
-            xx = sum(e[0] for e in edges.values()) / count + a + rel2 * c[0] * c[0] + weighted
-            xy = sum(e[1] for e in edges.values()) / count + b + rel2 * c[0] * c[1]
-            yy = sum(e[2] for e in edges.values()) / count + d + rel2 * c[1] * c[1] + weighted
-            scale = self._com_variance_factor
-            out["contact_to_com_cov"] = (scale * xx, scale * xy, scale * yy)
+            found_cov = self._offset_covariance(fit, edges, moment_std)
+            if found_cov is not None:
+                scale = self._com_variance_factor
+                out["contact_to_com_cov"] = tuple(scale * v for v in found_cov)
         return out
+
+    def _edge_covariances(self, relative: dict[int, Vec2]) -> dict[int, tuple[float, float, float]]:
+        """Each reported ``z_ij``'s covariance (its direction filter's, turned with the load
+        since the edge's instant), before its factor, ``(xx, xy, yy)``."""
+        edges = {}
+        for j in relative:
+            cov = self.edges[j].covariance
+            if cov is not None:
+                turned = self.angle - self._angle_at.get(self._edge_instant[j], self.angle)
+                edges[j] = packed(turned_covariance(cov, turned))
+        return edges
+
+    def _moment_std(self) -> float | None:
+        """``Ĵ``'s standard deviation before its factor: the inertia fit's, scaled by the
+        drives' torque gain, and that of the team's mean gain (``σ_g / √n`` relative)."""
+        if self.inertia is None or self.inertia.std is None:
+            return None
+        team_gain_std = (self.drive.std or 0.0) / math.sqrt(self.n)
+        return math.hypot(self.inertia.std * self._torque_gain, self.moment * team_gain_std)
+
+    def _offset_covariance(
+        self,
+        fit: ComFit,
+        edges: dict[int, tuple[float, float, float]],
+        moment_std: float | None,
+    ) -> tuple[float, float, float] | None:
+        """``Cov(p_C − p_Ci)`` from the ``ẑ_C`` of ``fit`` (Step 5's or Step 7's), before its
+        factor: the mean of ``edges`` (this robot's ``z_ij``'s), ``fit``'s covariance turned
+        with the load, ``c cᵀ (σ_J/J)²``, and the gains' ``σ_g² w / (2 n²)`` per axis
+        (:mod:`agent.algorithm.robust.uncertainty`); ``None`` before ``fit`` has one."""
+        com_cov = fit.covariance
+        if com_cov is None or not edges:
+            return None
+        alpha = self.angle - self.push_angle
+        (a, b), (_, d) = turned_covariance(com_cov, alpha)
+        c = fit.com_offset(alpha)
+        moment = self.moment
+        rel2 = (moment_std / moment) ** 2 if moment and moment_std is not None else 0.0
+        count = len(edges)
+        gain_std = self.drive.std or 0.0
+        weighted = gain_std * gain_std * self.mean_square_offset / (2.0 * self.n)
+        xx = sum(e[0] for e in edges.values()) / count + a + rel2 * c[0] * c[0] + weighted
+        xy = sum(e[1] for e in edges.values()) / count + b + rel2 * c[0] * c[1]
+        yy = sum(e[2] for e in edges.values()) / count + d + rel2 * c[1] * c[1] + weighted
+        return (xx, xy, yy)
 
     @property
     def _com_variance_factor(self) -> float:

@@ -73,16 +73,16 @@ STEP5_COM_VARIANCE = 2.87
 """The factor on the variance of Step 5's ``ẑ_C`` (its fit's, :class:`~agent.algorithm.robust.
 com_fit.ComFit`): the offset's uncertainty that Step 7's mass fit carries
 (:class:`~agent.algorithm.robust.mass_fit.MassFit`) and the prior of Step 7's refinement
-(:mod:`agent.algorithm.robust.hold_fit`). It is ``contact_to_com``'s factor in
-:data:`PUBLISHED_VARIANCE` as calibrated while Step 5's ``ẑ_C`` was the one published: ``heft
-bench calibrate published-variance --generated --coulomb-range 0.005 0.03 --first-seed 80
---seeds 120`` at the commit before Step 7 refined it (2026-11-27, 84a4867). Step 5's model has
-changed since (the drives' response and the floor's falling torque, :mod:`agent.algorithm.robust.
-com_fit`), and its covariance with it: over generated loads 0–19 at the noise benchmark's noise
-the median squared distance of robot 1's Step 5 offset from its truth, in this factor times its
-fit's covariance, went from 1.9 to 2.9 (χ²₂'s median: 1.39) (docs/benchmarks.md, "Step 5's
-model"). It is not calibrated again: no command reads Step 5's estimate now that Step 7's is
-the one published."""
+(:mod:`agent.algorithm.robust.hold_fit`). It was ``contact_to_com``'s factor in
+:data:`PUBLISHED_VARIANCE` while Step 5's ``ẑ_C`` was the one published (2026-11-27): the
+whole covariance of the robot's ``contact_to_com`` from Step 5's ``ẑ_C`` alone
+(:meth:`~agent.algorithm.robust.pipeline.RobustPipeline._offset_covariance`) is scaled.
+
+``heft bench calibrate step5-com-variance --generated --coulomb-range 0.005 0.03 --first-seed
+80 --seeds 120`` measures it again, on each robot's offset from Step 5's ``ẑ_C`` at the run's
+end (not published: Step 7 refines it). On 2026-11-29, once Step 5's model took the drives'
+response and the floor's falling torque (:mod:`agent.algorithm.robust.com_fit`), it printed
+2.31 for 95 % inside, and 97.3 % of 666 offsets inside with 2.87 (433 s wall): kept."""
 
 
 @dataclass(frozen=True)
@@ -99,6 +99,10 @@ class FitShares:
     own_mass: tuple[float, float, float] | None = None
     """``(m̂_i, σ, σ_fit)`` (kg): this robot's own mass (before the team's consensus on it), its
     standard deviation, and the mass fit's own share of it (scaled as ``m̂_i`` is by ``ḡ``)."""
+    push_offset: tuple[tuple[float, float], tuple[float, float, float]] | None = None
+    """``(contact_to_com, (xx, xy, yy))`` (m, m²): this robot's offset from Step 5's ``ẑ_C``
+    alone, and its covariance before :data:`STEP5_COM_VARIANCE` (what :data:`STEP5_COM_VARIANCE`
+    is calibrated on; Step 7's refinement is the one published)."""
 
 
 def packed(cov) -> tuple[float, float, float]:

@@ -11,7 +11,7 @@ import pytest
 
 from agent.algorithm.robust.arc_fit import CORRELATION, DIRECTION_VARIANCE
 from agent.algorithm.robust.least_squares import CORRELATION_TIME
-from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE
+from agent.algorithm.robust.uncertainty import PUBLISHED_VARIANCE, STEP5_COM_VARIANCE
 from agent.platform.heft import main
 from simulator.bench.arcs import LENGTHS_S, NOISES, ArcReading, fit_arc
 from simulator.bench.calibrate import (
@@ -30,6 +30,7 @@ from simulator.bench.calibrate import (
     published_variance,
     scalar_factor,
     seed_range,
+    step5_com_variance,
 )
 from simulator.bench.noise import Interval, SeedResult
 
@@ -124,6 +125,27 @@ def test_published_variance_from_known_intervals() -> None:
     assert robots.needed == pytest.approx((k_z, k_z / 4))  # robot 1: its worse edge
 
 
+def test_step5_com_variance_scales_step_5s_whole_offset_covariance() -> None:
+    """Step 5's offsets (``push_offset``) are published before the factor: one on the ellipse
+    of three times its covariance needs 3, one without error 0; the published
+    ``contact_to_com`` is not read."""
+    var = 1e-4
+    on_ellipse = math.sqrt(CHI2_PLANAR * 3 * var)
+    result = _seed(
+        0,
+        {
+            "push_offset": [
+                Interval(1, (0.3, 0.1 + on_ellipse), (0.3, 0.1), (var, 0.0, var)),
+                Interval(2, (0.3, 0.1), (0.3, 0.1), (var, 0.0, var)),
+            ],
+            "contact_to_com": [Interval(1, (1.0, 0.0), (0.0, 0.0), (var, 0.0, var))],
+        },
+    )
+    (offset,) = step5_com_variance([result])
+    assert offset.factor == STEP5_COM_VARIANCE
+    assert offset.needed == pytest.approx((3.0, 0.0))
+
+
 def test_direction_variance_scales_the_variance_across_the_edge_alone() -> None:
     """An edge along x published as ``R diag(A, D B)``: an error across it on the ellipse at
     ``2 D`` needs ``2 D``; the same error with a share along it needs more."""
@@ -208,6 +230,7 @@ def test_each_calibration_defaults_to_the_seeds_it_was_measured_on(heft) -> None
         parse()  # which factor is required
     assert [c.name for c in CALIBRATIONS] == [
         "published-variance",
+        "step5-com-variance",
         "direction-variance",
         "correlation-time",
         "arc-correlation",

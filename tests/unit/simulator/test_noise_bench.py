@@ -4,6 +4,7 @@ one real seed, and the commands' exit status from the goals' verdicts."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import pytest
 
@@ -142,6 +143,10 @@ def test_one_seed_against_the_centralized_fit() -> None:
     found = result.intervals
     assert len(found["moment"]) == len(found["own_mass"]) == 4
     assert all(s.fit_std is not None and s.fit_std > 0.0 for s in found["moment"])
+    # Step 5's offsets, before Step 7 refined them (what STEP5_COM_VARIANCE is calibrated on)
+    assert len(found["push_offset"]) == 4
+    for s in found["push_offset"]:
+        assert math.hypot(*s.error) < 0.05 and s.covariance[0] > 0.0 and s.covariance[2] > 0.0
     mass, moment, offset, _, robots, *floor = published_variance([result])
     # the floor's friction, published by every robot (frictionless here: its truth is 0)
     assert [f.quantity for f in floor] == ['tau_c ("friction_torque")', 'mu ("coulomb")']
