@@ -3,8 +3,9 @@
 In Step 7's stage the team pushes with a common force ``c(t)`` and holds the load's turn: each
 robot adds eq. (14)'s ``(τ_h/w) z_i⊥``, the holding torque ``τ_h = −n ẑ_C × c − b ω̂ w``
 (:meth:`~agent.algorithm.robust.phases.RobustPhases._not_turning`), which puts the common
-force's line of action through the COM that Step 5 found (``ẑ_C``, Step 5's, fixed for the
-stage) and damps what turn is left. The common force acts at the contacts' centroid, so about
+force's line of action through the team's ``ẑ_C`` (the consensus of the robots' own:
+:attr:`~agent.algorithm.robust.pipeline.RobustPipeline.com_offset_now`) and damps what turn is
+left. The common force acts at the contacts' centroid, so about
 the true COM
 
     J θ̈ = n z_C × c + τ_h − β d,      d = ω / √(‖ṗ_C‖² + ω² ρ² + v₀²):
@@ -21,11 +22,10 @@ as on the push (:mod:`agent.algorithm.robust.com_fit`): the holding torque cance
 push's, and what turns the load is the small difference of two large torques (with the push
 lagged and the known torque not, generated load 13's estimate moved the wrong way by 4.4 cm
 on the noise benchmark's floor). The holding torque is what this robot
-commanded, scaled by the drives' torque gain (:mod:`agent.algorithm.robust.team_mass`); the
-others' differ from it only through their own ``ẑ_C``, fixed during the stage, so the
-difference is a constant torque ``n ε × c`` that the fit takes into ``c₀``: each robot's
-estimate carries its own Step 5 estimate's deviation from the team's (2–7 mm on generated
-loads 8 and 13).
+commanded, scaled by the drives' torque gain (:mod:`agent.algorithm.robust.team_mass`), and
+every robot's is the same: each takes the team's ``ẑ_C``. (When each took its own Step 5
+``ẑ_C``, the difference was a torque ``n ε × c`` that the fit took into ``c₀``, 2–7 mm on
+generated loads 8 and 13, and a net force that the mass fit did not model.)
 
 Friction: while the load translates without turning, every support moves with the COM, and
 Coulomb friction is a force ``−μ m g ṗ̂_C`` through the COM, no torque (``Σ N_s r_s = 0``). A
