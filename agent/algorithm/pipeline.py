@@ -327,9 +327,9 @@ class EstimationPipeline:
             self.started[7] = e
         self._held(alpha, sign, span, added, schedule.mean_torque(prev, e))
         self._update_mass(v_i, offset, sign, span, added)
-        mass = self.mass_estimator.estimate
+        mass, std = self._settling_mass()
         if mass is not None:
-            self.settle.mass.update((mass,), e, self._std(self.mass_estimator))
+            self.settle.mass.update((mass,), e, std)
 
     # ---------------------------------------------------------------- phases
     def enter(self, phase: Phase, k: int, schedule: Schedule) -> None:
@@ -454,6 +454,12 @@ class EstimationPipeline:
         """The standard deviations of the distances and of the ``z_ij`` the excite phase's
         settling is judged by (``None``: by drift)."""
         return (None, None)
+
+    def _settling_mass(self) -> tuple[float | None, float | None]:
+        """The ``m̂`` that Step 7 settles by and its standard deviation (``None``: by its
+        drift): this robot's fit's."""
+        fit = self.mass_estimator
+        return fit.estimate, self._std(fit)
 
     def _std(self, estimator: Any) -> float | None:
         """An estimator's standard deviation, for settling (``None``: by drift)."""

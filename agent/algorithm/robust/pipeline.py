@@ -244,6 +244,14 @@ class RobustPipeline(EstimationPipeline):
         )
         return (own, std) if team is None else (team[0], team[0] * team[1])
 
+    def _settling_mass(self) -> tuple[float | None, float | None]:
+        """The team's ``m̂``, the one published, and its standard deviation
+        (:meth:`_robust_mass`): Step 7 ends once the team knows its mass, not once every robot
+        knows its own. The last robot to know its own is the one whose fit is the noisiest (on
+        generated load 94, 49 kg under three robots, robot 1's was 0.87 % where the others'
+        were 0.21 and 0.24 %), and the team's ``m̂`` weighs it by its information."""
+        return self._robust_mass()
+
     def _own_mass(self) -> tuple[float | None, float | None]:
         """This robot's mass fit scaled by the drives' mean gain ``ḡ``, and its standard
         deviation (with that of ``ḡ``, every robot's gain taken as uncertain as this one's):
