@@ -45,8 +45,7 @@ they are the check.
 ``heft bench calibrate published-variance --generated --coulomb-range 0.005 0.03 --first-seed
 80 --seeds 120`` prints each factor, the share inside with it, and the factor for 95 % inside.
 On 2026-11-29, once Step 7's mass fit took the displacement's steps as its rows
-(:mod:`agent.algorithm.robust.mass_fit`: its ``μ̂``'s uncertainty, counted on the displacements
-themselves, had been about a fortieth of what it is), the runs with the factors before gave
+(:mod:`agent.algorithm.robust.mass_fit`), the runs with the factors before gave
 these: 1.07 for ``mass`` (97.4 % inside with 2.1), 3.76 for ``moment`` (95.2 % with 3.95),
 0.775 for ``contact_to_com`` (96.5 % with 0.975), 1.56 for ``relative`` (each robot's edges at
 once; 95.3 % with 1.58), 20 for ``friction_torque`` (94.9 % with 19.6) and 9.55 for ``coulomb``
