@@ -170,7 +170,7 @@ class RobustPipeline(EstimationPipeline):
         ``ẑ_C``. Every robot holds the load's turn with ``(τ/w) z_i⊥``, ``τ = −n ẑ_C × c``
         (:meth:`~agent.algorithm.robust.phases.RobustPhases._not_turning`), whose sum over the
         team is no force only if every robot's ``τ`` is the same: with each robot's own
-        ``ẑ_C`` (9 cm apart on generated load 14), about 1 N of a 15 N push went unmodelled,
+        ``ẑ_C`` (12 cm apart on generated load 14), about 1 N of a 15 N push went unmodelled,
         and every robot's ``m̂`` was 3–5 % low."""
         alpha = self.angle - self.push_angle
         team = self._team_com(alpha)

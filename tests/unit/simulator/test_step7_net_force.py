@@ -1,7 +1,7 @@
 """Step 7's stage holds the load's turn with a torque and no net force: every robot adds
 ``(τ/w) z_i⊥`` with ``τ = −n ẑ_C × c``, whose sum over the team is no force only when every
 robot's ``ẑ_C`` is the same. Generated load 14 on its floor (32.9 kg under three robots,
-μ = 2.2 %), run with another seed of the benchmark's noise, left one robot's Step 5 ``ẑ_C`` 9 cm
+μ = 2.2 %), run with another seed of the benchmark's noise, left one robot's Step 5 ``ẑ_C`` 12 cm
 from the others': with each robot's own, about 1 N of a 15 N push went unmodelled and every
 robot's ``m̂`` was 3–5 % low. With the team's mean ``ẑ_C`` the sum stays under 0.1 N."""
 
