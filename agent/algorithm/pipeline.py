@@ -354,6 +354,10 @@ class EstimationPipeline:
         self.settle = self.settle.with_load_forgotten()
 
     # ---------------------------------------------------------------- the load's frame
+    def known_relative_positions(self) -> dict[int, Vec2]:
+        """``{j: ẑ_ij}`` for every neighbour whose edge has an estimate now."""
+        return {j: z for j in self.neighbours if (z := self.relative_position(j)) is not None}
+
     def relative_position(self, j: int) -> Vec2 | None:
         """``z_ij`` at the estimation instant (turned forward if its sample is stale)."""
         z = self.edges[j].estimate
@@ -383,11 +387,7 @@ class EstimationPipeline:
 
     def estimates(self, robot: int, schedule: Schedule) -> Estimates:
         """The current estimates, at the estimation instant (see :class:`Estimates`)."""
-        relative = {}
-        for j in self.neighbours:
-            z = self.relative_position(j)
-            if z is not None:
-                relative[j] = z
+        relative = self.known_relative_positions()
         z_i = self.consensus.centroid if 2 in self.started else None
         z_c = None
         observed = None

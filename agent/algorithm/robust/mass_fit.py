@@ -29,7 +29,8 @@ the fit's ``σ̂² M⁻¹`` means what it says. Fitted on the displacements them
 robot's ``m̂`` on generated load 14 (32.9 kg under three robots, μ = 2.2 %, nine runs of the
 noise benchmark's noise with other seeds) was 1.5 % off (root mean square) where the fit gave
 0.1 %; on its steps, 0.9 % off where it gives 0.4 % (the trapezoid's neighbouring steps share a
-sample).
+sample, and the fit takes the direction ``v̂_C`` and the gains as known: what the rest is was not
+measured).
 
 On a real floor the load slides or rolls against Coulomb friction at its supports. The team
 measures the mass while the load translates without turning (the push's *translation* stage,
@@ -48,8 +49,8 @@ noise benchmark's runs of the generated loads on floors, before the team's conse
 ``k`` is a correlation time of ``k Δt / 2``, two rows a tick): on 2026-11-29, fitted on the
 steps, it printed 3.8 for 95 % of them within 1.96 standard deviations (84.2 % with every row
 counted; the fit's share is 64 % of the variance, the offset's and the gains' the rest). Each
-row stays counted: the settling of Step 7 reads this variance, and the team's ``m̂``, which is
-published, has its own factor
+row stays counted: the team's ``m̂``, which Step 7 settles by and the team publishes, weighs
+the robots' fits by this variance, and has its own factor
 (:data:`~agent.algorithm.robust.uncertainty.PUBLISHED_VARIANCE`). The fit takes the
 commanded force for the applied one; the pipeline scales its ``m`` by the drives' mean gain
 (:mod:`agent.algorithm.robust.drive_gain`).

@@ -533,7 +533,7 @@ class RobustPipeline(EstimationPipeline):
     def _published_load(self) -> tuple[float, tuple[float, float, float]] | None:
         """The published relative standard deviation of ``m̂`` and covariance of this robot's
         ``contact_to_com``, now (``None`` if either is not known)."""
-        relative = {j: z for j in self.neighbours if (z := self.relative_position(j)) is not None}
+        relative = self.known_relative_positions()
         z_c = self.com_offset(self.angle - self.push_angle)
         mass = self.mass
         if z_c is None or not mass:
@@ -585,7 +585,7 @@ class RobustPipeline(EstimationPipeline):
         com = self.com
         if com is None or (self.hold is not None and self.hold.swung > SWUNG_TURN):
             return None
-        relative = {j: z for j in self.neighbours if (z := self.relative_position(j)) is not None}
+        relative = self.known_relative_positions()
         edges = self._edge_covariances(relative)
         z_c = self._push_offset(self.angle - self.push_angle)
         cov = self._offset_covariance(com, edges, self._moment_std())

@@ -52,7 +52,10 @@ once; 95.3 % with 1.58), 20 for ``friction_torque`` (94.9 % with 19.6) and 9.55 
 (100 % with 420) (653 s wall). ``coulomb`` takes the factor printed; the others, within a hair
 of 95 % or above it, stay. With it ``heft bench friction`` (the paper's load on four casters,
 seeds 0–19, μ = 0 to 5 %) held ``μ̂``'s truth 97.5–100 % of the time at every μ, and ``m̂``'s
-100 %.
+100 %. Not measured again since Step 7 ends on the team's ``m̂``: with it the check seeds 0–39,
+40–79 and 80–119 held ``m̂``'s truth 97.0, 97.2 and 98.1 % of the time, ``μ̂``'s 98.3, 95.3 and
+96.7 %.
+
 On 2026-11-29, once Step 5's fit took the push through the drives' response and the floor's
 torque falling as the COM moves (:mod:`agent.algorithm.robust.com_fit`), the runs with the
 factors before (2.1, 1.52, 0.975, 3.65, 16.8 and 336) gave these: 1.29 for ``mass`` (97.1 %
